@@ -1,0 +1,1 @@
+"""inspector: rollout inspector for world-action models on the SO-101 arm."""

@@ -1,0 +1,132 @@
+"""``inspector`` command line: import, info, report, serve, export, demo.
+
+Bad input ends with exit code 2 and one line ``error: <file>: <what is wrong>``, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Callable, Sequence
+
+from .errors import InspectorError
+
+EXIT_BAD_INPUT = 2
+
+
+def _cmd_import(args: argparse.Namespace) -> int:
+    from .importers.dreamzero_so101 import import_dreamzero
+
+    dest = import_dreamzero(args.src, args.output, dataset=args.dataset, episode=args.episode,
+                            overwrite=args.overwrite)
+    print(f"wrote session {dest}")
+    return 0
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    from .info import describe, format_info
+
+    info = describe(Path(args.path))
+    print(json.dumps(info, indent=2) if args.json else format_info(info))
+    return 0
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from .report import build_report, format_report
+
+    report = build_report(args.paths, dataset=args.dataset)
+    print(json.dumps(report, indent=2) if args.json else format_report(report))
+    return 0
+
+
+def _cmd_serve(args: argparse.Namespace) -> int:
+    from .app import serve
+
+    serve(args.paths, host=args.host, port=args.port, share=args.share, dataset=args.dataset)
+    return 0
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from .export import export_cli
+
+    return export_cli(args.path, args.output, rollout=args.rollout, views=args.views,
+                      dataset=args.dataset)
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from .demo import rebuild_demo
+
+    if not args.rebuild:
+        print("use --rebuild to regenerate the demo session (inspector serve opens it)")
+        return 0
+    rebuild_demo(Path(args.out) if args.out else None, quick=args.quick)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="inspector",
+        description="Rollout inspector for world-action models on the SO-101 arm.")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("import", help="import model outputs into a native session")
+    fmt = p.add_subparsers(dest="format", required=True)
+    dz = fmt.add_parser("dreamzero-so101", help="DreamZero-SO101 evaluation directories")
+    dz.add_argument("src", help="a rollout directory or a parent of several (searched recursively)")
+    dz.add_argument("-o", "--output", required=True, help="session directory to create")
+    dz.add_argument("--dataset", help="LeRobot dataset (root or org/name in the HF cache) with the GT episode")
+    dz.add_argument("--episode", type=int, help="GT episode index (default: the rollout's own)")
+    dz.add_argument("--overwrite", action="store_true", help="replace an existing session")
+    dz.set_defaults(func=_cmd_import)
+
+    p = sub.add_parser("info", help="describe a LeRobot dataset or a session")
+    p.add_argument("path")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.set_defaults(func=_cmd_info)
+
+    p = sub.add_parser("report", help="drift metrics as tables or JSON")
+    p.add_argument("paths", nargs="+", help="sessions, rollouts or DreamZero-SO101 source dirs")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
+    p.set_defaults(func=_cmd_report)
+
+    p = sub.add_parser("serve", help="the web app (default: the bundled demo session)")
+    p.add_argument("paths", nargs="*", help="sessions, rollouts or DreamZero-SO101 source dirs")
+    p.add_argument("--host", default="127.0.0.1", help="interface to bind (default loopback only)")
+    p.add_argument("--port", type=int, default=8080)
+    p.add_argument("--share", action="store_true", help="also open a public viser share link")
+    p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
+    p.set_defaults(func=_cmd_serve)
+
+    p = sub.add_parser("export", help="write a Rerun .rrd recording")
+    p.add_argument("path", help="a session, a rollout or a DreamZero-SO101 source dir")
+    p.add_argument("-o", "--output", required=True, help=".rrd file (or directory for several rollouts)")
+    p.add_argument("--rollout", help="tag of the rollout to export (default: all)")
+    p.add_argument("--views", nargs="*", help="camera views to include (default: all)")
+    p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
+    p.set_defaults(func=_cmd_export)
+
+    p = sub.add_parser("demo", help="rebuild the bundled demo session")
+    p.add_argument("--rebuild", action="store_true")
+    p.add_argument("--out", help="output directory (default: sessions/demo)")
+    p.add_argument("--quick", action="store_true", help="a tiny version (a few frames), for tests")
+    p.set_defaults(func=_cmd_demo)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    func: Callable[[argparse.Namespace], int] = args.func
+    try:
+        return func(args)
+    except InspectorError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,321 @@
+"""Drift metrics, exactly as DESIGN §5 defines them; vectorised, no loop over timesteps.
+
+All joint-space figures are in the data's own units (arm degrees or -100..100, gripper 0..100):
+``d(a, b) = ||a - b||_2`` over the 6 joints. Functions take a leading batch axis where it helps
+(1,000 rollouts at once for a sweep) and plain (T, 6) arrays otherwise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import torch
+
+Array = npt.NDArray[np.float64]
+
+
+# ----------------------------------------------------------------------------------------------
+# Chunk errors (the seed report's action_rmse_deg / per_step_mse / per_joint_rmse)
+
+
+@dataclass
+class ChunkErrors:
+    """Errors of predicted chunks against GT over the same steps.
+
+    Attributes:
+        rmse: sqrt(mean((pred - gt)^2)) over every step and joint.
+        per_step_mse: (H,) mean over joints (and chunks) per horizon step.
+        per_joint_rmse: (6,) over steps (and chunks) per joint.
+    """
+
+    rmse: float
+    per_step_mse: Array
+    per_joint_rmse: Array
+
+
+def chunk_errors(pred: npt.ArrayLike, gt: npt.ArrayLike) -> ChunkErrors:
+    """Errors of (H, 6) or (N, H, 6) predicted chunks against GT of the same shape."""
+    sq = (np.asarray(pred, np.float64) - np.asarray(gt, np.float64)) ** 2
+    if sq.ndim == 2:
+        sq = sq[None]
+    return ChunkErrors(
+        rmse=float(np.sqrt(sq.mean())),
+        per_step_mse=sq.mean(axis=(0, 2)),
+        per_joint_rmse=np.sqrt(sq.mean(axis=(0, 1))),
+    )
+
+
+def per_chunk_rmse(pred_chunks: npt.ArrayLike, gt_chunks: npt.ArrayLike) -> Array:
+    """(N,) RMSE of each chunk: (N, H, 6) vs (N, H, 6)."""
+    sq = (np.asarray(pred_chunks, np.float64) - np.asarray(gt_chunks, np.float64)) ** 2
+    return np.sqrt(sq.mean(axis=(1, 2)))
+
+
+# ----------------------------------------------------------------------------------------------
+# Drift along a rollout
+
+
+def joint_distance(a: npt.ArrayLike, b: npt.ArrayLike) -> Array:
+    """``||a - b||_2`` over the last axis (the 6 joints)."""
+    return np.linalg.norm(np.asarray(a, np.float64) - np.asarray(b, np.float64), axis=-1)
+
+
+def time_aligned(pred: npt.ArrayLike, gt: npt.ArrayLike, offset: int = 0) -> tuple[Array, Array, Array]:
+    """GT at the same time as each predicted sample, clamped at the episode's end.
+
+    Args:
+        pred: (..., T, 6) predicted joints, one per executed step.
+        gt: (G, 6) GT joints of the episode.
+        offset: GT index of rollout step 0 (the rollout's start frame).
+
+    Returns:
+        (drift, gt_aligned, post_episode): (..., T) ``d(pred(t), gt(min(offset + t, G - 1)))``,
+        (T, 6) the GT used, and (T,) True where ``offset + t`` lies past the episode's end.
+    """
+    pred = np.asarray(pred, np.float64)
+    gt = np.asarray(gt, np.float64)
+    t = offset + np.arange(pred.shape[-2])
+    idx = np.minimum(t, gt.shape[0] - 1)
+    gt_aligned = gt[idx]
+    return joint_distance(pred, gt_aligned), gt_aligned, t >= gt.shape[0]
+
+
+def best_match(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, npt.NDArray[np.int64]]:
+    """Distance to the nearest GT pose anywhere in the episode (speed-invariant).
+
+    Args:
+        pred: (..., T, 6).
+        gt: (G, 6).
+
+    Returns:
+        (drift, index): (..., T) ``min_j d(pred(t), gt_j)`` and its argmin j (the GT frame the
+        arm "is at").
+    """
+    p = torch.as_tensor(np.asarray(pred, np.float64))
+    g = torch.as_tensor(np.asarray(gt, np.float64))
+    squeeze = p.ndim == 2
+    if squeeze:
+        p = p[None]
+    out_d, out_i = [], []
+    # chunks of rollouts keep the (B, T, G) distance block small
+    for block in torch.split(p, max(1, 2_000_000 // max(1, p.shape[1] * g.shape[0])), dim=0):
+        d = torch.cdist(block, g[None].expand(block.shape[0], -1, -1), compute_mode="donot_use_mm_for_euclid_dist")
+        m = d.min(dim=-1)
+        out_d.append(m.values)
+        out_i.append(m.indices)
+    drift = torch.cat(out_d).numpy()
+    index = torch.cat(out_i).numpy()
+    return (drift[0], index[0]) if squeeze else (drift, index)
+
+
+def tempo(match_index: npt.ArrayLike, valid: npt.ArrayLike | None = None) -> Array | float:
+    """Slope of matched GT time against rollout time: 1 = real speed, 0.8 = 20 % slow.
+
+    Least squares of ``match_index`` on the step number over the ``valid`` samples (by default
+    all). A prediction parked at one pose has tempo ~0.
+
+    Args:
+        match_index: (..., T) argmin indices from :func:`best_match`.
+        valid: (T,) samples to fit (e.g. those before the episode's end).
+    """
+    j = np.asarray(match_index, np.float64)
+    t = np.arange(j.shape[-1], dtype=np.float64)
+    w = np.ones_like(t) if valid is None else np.asarray(valid, np.float64)
+    if w.sum() < 2:
+        return np.full(j.shape[:-1], np.nan) if j.ndim > 1 else float("nan")
+    tm = (w * t).sum() / w.sum()
+    jm = (w * j).sum(-1, keepdims=True) / w.sum()
+    slope = (w * (t - tm) * (j - jm)).sum(-1) / (w * (t - tm) ** 2).sum()
+    return slope if j.ndim > 1 else float(slope)
+
+
+def drift_split(time_aligned_drift: npt.ArrayLike, best_match_drift: npt.ArrayLike) -> tuple[Array, Array]:
+    """Split drift into (speed mismatch, path error).
+
+    The path error is how far the arm is from *anywhere* on the real path (best-match); what the
+    time-aligned drift adds on top is being at the wrong place along it, i.e. a tempo mismatch.
+    """
+    ta = np.asarray(time_aligned_drift, np.float64)
+    bm = np.asarray(best_match_drift, np.float64)
+    return np.maximum(ta - bm, 0.0), bm
+
+
+def dtw(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, Array]:
+    """Order-preserving alignment (dynamic time warping) of predicted and GT paths.
+
+    Unlike best-match, a prediction that visits the right poses in the wrong order pays for it.
+    The DP runs over anti-diagonals, each one a vector operation over all rollouts of the batch.
+
+    Args:
+        pred: (..., T, 6).
+        gt: (G, 6).
+
+    Returns:
+        (drift, cost): (..., T) mean distance of the GT samples aligned to each predicted sample,
+        and (...,) total alignment cost divided by the path length.
+    """
+    p = torch.as_tensor(np.asarray(pred, np.float64))
+    g = torch.as_tensor(np.asarray(gt, np.float64))
+    squeeze = p.ndim == 2
+    if squeeze:
+        p = p[None]
+    drifts, costs = [], []
+    for block in torch.split(p, max(1, 4_000_000 // max(1, p.shape[1] * g.shape[0])), dim=0):
+        d, c = _dtw_block(block, g)
+        drifts.append(d)
+        costs.append(c)
+    drift = torch.cat(drifts).numpy()
+    cost = torch.cat(costs).numpy()
+    return (drift[0], float(cost[0])) if squeeze else (drift, cost)  # type: ignore[return-value]
+
+
+def _dtw_block(p: torch.Tensor, g: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    B, T, _ = p.shape
+    G = g.shape[0]
+    cost = torch.cdist(p, g[None].expand(B, -1, -1), compute_mode="donot_use_mm_for_euclid_dist")
+    inf = torch.tensor(float("inf"), dtype=cost.dtype)
+    acc = torch.full((B, T + 1, G + 1), float("inf"), dtype=cost.dtype)
+    acc[:, 0, 0] = 0.0
+    # move: 0 diagonal, 1 from above (i-1, j), 2 from the left (i, j-1)
+    move = torch.zeros((B, T, G), dtype=torch.int8)
+    for k in range(2, T + G + 1):  # anti-diagonal i + j = k over the (T+1, G+1) table
+        i = torch.arange(max(1, k - G), min(T, k - 1) + 1)
+        j = k - i
+        candidates = torch.stack([acc[:, i - 1, j - 1], acc[:, i - 1, j], acc[:, i, j - 1]], dim=-1)
+        best, arg = candidates.min(dim=-1)
+        acc[:, i, j] = cost[:, i - 1, j - 1] + torch.where(torch.isfinite(best), best, inf)
+        move[:, i - 1, j - 1] = arg.to(torch.int8)
+    # backtrack all rollouts of the block together: each step moves every path one cell
+    drift_sum = torch.zeros((B, T), dtype=cost.dtype)
+    drift_cnt = torch.zeros((B, T), dtype=cost.dtype)
+    bi = torch.full((B,), T - 1)
+    bj = torch.full((B,), G - 1)
+    rows = torch.arange(B)
+    length = torch.zeros(B, dtype=cost.dtype)
+    active = torch.ones(B, dtype=torch.bool)
+    while bool(active.any()):
+        a = rows[active]
+        drift_sum[a, bi[a]] += cost[a, bi[a], bj[a]]
+        drift_cnt[a, bi[a]] += 1
+        length[a] += 1
+        m = move[a, bi[a], bj[a]].long()
+        at_origin = (bi[a] == 0) & (bj[a] == 0)
+        bi[a] = torch.where(at_origin, bi[a], bi[a] - (m != 2).long())
+        bj[a] = torch.where(at_origin, bj[a], bj[a] - (m != 1).long())
+        active[a] = ~at_origin
+    return drift_sum / drift_cnt.clamp(min=1), acc[:, T, G] / length
+
+
+# ----------------------------------------------------------------------------------------------
+# Limits, end effector, video
+
+
+def limit_violations(values: npt.ArrayLike, limits: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+    """(..., 6) True where a joint lies outside its [lower, upper] limit (both in data units)."""
+    v = np.asarray(values, np.float64)
+    lim = np.asarray(limits, np.float64)
+    return (v < lim[:, 0]) | (v > lim[:, 1])
+
+
+def psnr(pred: npt.ArrayLike, gt: npt.ArrayLike) -> Array:
+    """(N,) PSNR [dB] of (N, H, W, 3) uint8 frames (peak 255); GT must already match in size."""
+    p = torch.as_tensor(np.asarray(pred))
+    g = torch.as_tensor(np.asarray(gt))
+    # integer arithmetic: exact, and far cheaper than float64 on 8-bit frames
+    diff = p.to(torch.int16) - g.to(torch.int16)
+    sq_sum = (diff.to(torch.int32) ** 2).flatten(1).sum(dim=1, dtype=torch.int64)
+    mse = (sq_sum.to(torch.float64) / diff[0].numel()).clamp(min=1e-10)
+    return (10.0 * torch.log10(255.0 ** 2 / mse)).numpy()
+
+
+def ssim(pred: npt.ArrayLike, gt: npt.ArrayLike) -> Array:
+    """(N,) SSIM of (N, H, W, 3) uint8 frames on luma, 11x11 Gaussian window (sigma 1.5).
+
+    The window is separable, so each local mean is two 11-tap passes instead of one 121-tap
+    pass; float32 is ample for 8-bit frames.
+    """
+    def luma(x: npt.ArrayLike) -> torch.Tensor:
+        t = torch.as_tensor(np.asarray(x)).to(torch.float32)
+        return 0.299 * t[..., 0] + 0.587 * t[..., 1] + 0.114 * t[..., 2]
+
+    x, y = luma(pred), luma(gt)
+    coords = torch.arange(11, dtype=torch.float32) - 5
+    g1 = torch.exp(-(coords ** 2) / (2 * 1.5 ** 2))
+    g1 = g1 / g1.sum()
+    # the five local moments of each frame go through the blur together, as channels
+    stack = torch.stack([x, y, x * x, y * y, x * y], dim=1)  # (N, 5, H, W)
+    vertical = g1.view(1, 1, 11, 1).repeat(5, 1, 1, 1)
+    horizontal = g1.view(1, 1, 1, 11).repeat(5, 1, 1, 1)
+    out = []
+    for block in torch.split(stack, 32):
+        m = torch.nn.functional.conv2d(torch.nn.functional.conv2d(block, vertical, groups=5), horizontal, groups=5)
+        mx, my, exx, eyy, exy = m.unbind(dim=1)
+        c1, c2 = (0.01 * 255) ** 2, (0.03 * 255) ** 2
+        sxx, syy, sxy = exx - mx ** 2, eyy - my ** 2, exy - mx * my
+        s = ((2 * mx * my + c1) * (2 * sxy + c2)) / ((mx ** 2 + my ** 2 + c1) * (sxx + syy + c2))
+        out.append(s.mean(dim=(1, 2)).to(torch.float64))
+    return torch.cat(out).numpy()
+
+
+def resize_frames(frames: npt.ArrayLike, height: int, width: int) -> npt.NDArray[np.uint8]:
+    """(N, h, w, 3) uint8 -> (N, height, width, 3) uint8, antialiased bilinear."""
+    f = np.asarray(frames)
+    if f.shape[1:3] == (height, width):
+        return f
+    t = torch.as_tensor(f).permute(0, 3, 1, 2).to(torch.float32)
+    t = torch.nn.functional.interpolate(t, size=(height, width), mode="bilinear", antialias=True,
+                                        align_corners=False)
+    return t.round().clamp(0, 255).to(torch.uint8).permute(0, 2, 3, 1).numpy()
+
+
+# ----------------------------------------------------------------------------------------------
+# Two rollouts, sets of rollouts
+
+
+def prompt_divergence(pred_a: npt.ArrayLike, pred_b: npt.ArrayLike, executed_per_chunk: int,
+                      threshold: float = 2.0) -> tuple[Array, Array, int | None]:
+    """How two rollouts from the same start (e.g. training vs novel prompt) part and meet again.
+
+    Args:
+        pred_a, pred_b: (T, 6) executed joints of the two rollouts (the shorter length is used).
+        executed_per_chunk: steps per chunk.
+        threshold: per-chunk mean distance (data units) under which the two count as the same.
+
+    Returns:
+        (per_step, per_chunk, collapse_chunk): ``d`` per step, its mean per chunk, and the first
+        chunk from which the rollouts stay within ``threshold`` after having been apart (None if
+        they never part, or never meet again).
+    """
+    n = min(len(pred_a), len(pred_b))
+    per_step = joint_distance(np.asarray(pred_a)[:n], np.asarray(pred_b)[:n])
+    per_chunk = chunk_mean(per_step, executed_per_chunk)
+    close = per_chunk < threshold
+    apart = np.flatnonzero(~close)
+    if apart.size == 0 or apart[-1] == len(per_chunk) - 1:
+        return per_step, per_chunk, None
+    return per_step, per_chunk, int(apart[-1] + 1)
+
+
+def chunk_mean(per_step: npt.ArrayLike, executed_per_chunk: int) -> Array:
+    """(n_chunks,) mean of a (T,) per-step series over each chunk's steps (NaN-aware)."""
+    x = np.asarray(per_step, np.float64)
+    n = -(-len(x) // executed_per_chunk)
+    padded = np.full(n * executed_per_chunk, np.nan)
+    padded[: len(x)] = x
+    blocks = padded.reshape(n, executed_per_chunk)
+    counts = np.isfinite(blocks).sum(axis=1)
+    sums = np.where(np.isfinite(blocks), blocks, 0.0).sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
+
+
+def aggregate(values: npt.ArrayLike) -> dict[str, float | int | None]:
+    """mean / median / best (min) / worst (max) over the finite values of a set."""
+    v = np.asarray(values, np.float64)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return {"n": 0, "mean": None, "median": None, "best": None, "worst": None}
+    return {"n": int(v.size), "mean": float(v.mean()), "median": float(np.median(v)),
+            "best": float(v.min()), "worst": float(v.max())}

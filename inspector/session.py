@@ -1,0 +1,564 @@
+"""Native session format: read, validate, write atomically.
+
+Layout (every array in dataset units: arm degrees or -100..100 as ``session.json`` says, gripper
+0..100)::
+
+    sessions/<session>/
+      session.json            schema, name, robot, units, joint_names, gt_source, model
+      rollouts/<tag>/
+        rollout.json          kind, episode_index, start_frame, prompt, fps, horizon,
+                              executed_per_chunk, frames_per_chunk, views, gt {...}
+        actions.npy           (n_chunks, horizon, 6) predicted chunks
+        states.npy            optional (n_chunks + 1, 6) state before each chunk
+        video/<view>.mp4      imagined frames, H.264
+        gt/actions.npy        optional (T, 6) GT joints for steps start_frame .. start_frame+T-1
+        gt/video/<view>.mp4   optional; frame i shows the real scene at imagined frame i's time
+      annotations.json        flags and notes from the app, written atomically
+
+Time: rollout step ``s`` is the s-th *executed* action (chunk ``s // executed_per_chunk``); it
+happens at ``s / fps`` seconds after ``start_frame``. Imagined frame ``f`` of a chunk shows step
+``f * executed_per_chunk / frames_per_chunk`` of that chunk.
+
+Writing never leaves a half-written session: a new session is built in a temporary sibling
+directory and renamed into place; a rollout added to an existing session is built in a temporary
+directory under ``rollouts/`` and renamed; JSON files are replaced with ``os.replace``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal, Mapping
+
+import numpy as np
+import numpy.typing as npt
+
+from .errors import InspectorError, require
+from .units import JOINT_NAMES, Units, parse_units
+from .video import VideoClip, encode_h264
+
+SCHEMA = "inspector.session/1"
+SESSION_FILE = "session.json"
+ROLLOUT_FILE = "rollout.json"
+ANNOTATIONS_FILE = "annotations.json"
+ROLLOUTS_DIR = "rollouts"
+ACTIONS_FILE = "actions.npy"
+STATES_FILE = "states.npy"
+VIDEO_DIR = "video"
+GT_DIR = "gt"
+
+RolloutKind = Literal["single_chunk", "autoregressive"]
+KINDS: tuple[str, ...] = ("single_chunk", "autoregressive")
+_TAG = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,127}$")
+_VIEW = _TAG
+
+
+# ----------------------------------------------------------------------------------------------
+# Reading
+
+
+@dataclass
+class Rollout:
+    """One rollout of a session, validated on load (arrays memory-mapped, videos decoded lazily).
+
+    Attributes:
+        actions: (n_chunks, horizon, 6) predicted chunks, dataset units, JOINT_NAMES order.
+        states: (n_chunks + 1, 6) or None.
+        gt_actions: (T, 6) GT joints from ``start_frame`` on, or None (then the session's
+            dataset may supply them).
+    """
+
+    root: Path
+    tag: str
+    kind: RolloutKind
+    prompt: str
+    episode_index: int | None
+    start_frame: int
+    fps: float
+    horizon: int
+    executed_per_chunk: int
+    frames_per_chunk: int
+    views: list[str]
+    units: Units
+    actions: npt.NDArray[np.float64]
+    states: npt.NDArray[np.float64] | None = None
+    gt_actions: npt.NDArray[np.float64] | None = None
+    gt_views: list[str] = field(default_factory=list)
+    gt_episode_length: int | None = None
+    extra: dict[str, Any] = field(default_factory=dict)  # importer provenance, reference metrics
+    session: "Session | None" = None
+    _clips: dict[tuple[str, str], VideoClip] = field(default_factory=dict, repr=False)
+
+    @property
+    def n_chunks(self) -> int:
+        return int(self.actions.shape[0])
+
+    @property
+    def has_gt_joints(self) -> bool:
+        return self.gt_actions is not None
+
+    def executed_actions(self) -> npt.NDArray[np.float64]:
+        """(n_steps, 6) the actions that run, chained chunk after chunk.
+
+        An autoregressive rollout executes the first ``executed_per_chunk`` actions of each chunk;
+        a single-chunk rollout is judged on its whole horizon.
+        """
+        if self.kind == "single_chunk":
+            return self.actions.reshape(-1, self.actions.shape[-1])
+        return self.actions[:, : self.executed_per_chunk].reshape(-1, self.actions.shape[-1])
+
+    def video_path(self, view: str, gt: bool = False) -> Path:
+        base = self.root / GT_DIR / VIDEO_DIR if gt else self.root / VIDEO_DIR
+        return base / f"{view}.mp4"
+
+    def video(self, view: str, gt: bool = False) -> VideoClip:
+        """The imagined (or carried GT) clip of ``view``, decoded once and cached.
+
+        A carried GT clip is decoded straight to the imagined clip's size (when that view has
+        one), which is what every comparison and every side-by-side display wants.
+        """
+        known = self.gt_views if gt else self.views
+        if view not in known:
+            raise InspectorError(self.root / ROLLOUT_FILE, f"no {'GT ' if gt else ''}view {view!r}; views: {known}")
+        key = ("gt" if gt else "pred", view)
+        if key not in self._clips:
+            size = None
+            if gt and view in self.views:
+                from .video import probe
+
+                info = probe(self.video_path(view))
+                size = (info.width, info.height)
+            self._clips[key] = VideoClip(self.video_path(view, gt), size=size)
+        return self._clips[key]
+
+
+@dataclass
+class Session:
+    """A session directory: its metadata, the rollouts that loaded and the errors of those that did not.
+
+    One bad rollout never hides the others: it lands in ``errors`` with the message naming its file.
+    """
+
+    root: Path
+    name: str
+    robot: str
+    units: Units
+    joint_names: list[str]
+    gt_source: dict[str, Any]
+    model: dict[str, Any]
+    rollouts: dict[str, Rollout] = field(default_factory=dict)
+    errors: dict[str, InspectorError] = field(default_factory=dict)
+
+    @property
+    def dataset_root(self) -> Path | None:
+        """The GT dataset directory, resolved against the session directory when relative."""
+        ds = self.gt_source.get("dataset")
+        if not ds:
+            return None
+        p = Path(ds).expanduser()
+        return p if p.is_absolute() else (self.root / p).resolve()
+
+    def tags(self) -> list[str]:
+        return sorted([*self.rollouts, *self.errors])
+
+
+def is_session(path: str | Path) -> bool:
+    return (Path(path) / SESSION_FILE).is_file()
+
+
+def is_rollout(path: str | Path) -> bool:
+    return (Path(path) / ROLLOUT_FILE).is_file()
+
+
+def read_json_object(path: Path) -> dict[str, Any]:
+    """Parse a JSON file that must hold an object; errors name the file."""
+    if not path.is_file():
+        raise InspectorError(path, "file not found")
+    try:
+        data = json.loads(path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InspectorError(path, f"invalid JSON ({exc})") from None
+    require(isinstance(data, dict), path, f"expected a JSON object, found {type(data).__name__}")
+    return data
+
+
+def open_session(root: str | Path) -> Session:
+    """Read ``session.json`` and every rollout under ``rollouts/`` (bad ones go to ``errors``).
+
+    Raises:
+        InspectorError: ``session.json`` itself is missing or invalid.
+    """
+    root = Path(root)
+    meta_path = root / SESSION_FILE
+    meta = read_json_object(meta_path)
+    schema = meta.get("schema")
+    require(schema == SCHEMA, meta_path, f"schema: expected {SCHEMA!r}, found {schema!r}")
+    try:
+        units = parse_units(meta.get("units", {}), "units")
+    except ValueError as exc:
+        raise InspectorError(meta_path, str(exc)) from None
+    joint_names = meta.get("joint_names", list(JOINT_NAMES))
+    require(joint_names == list(JOINT_NAMES), meta_path,
+            f"joint_names: expected {list(JOINT_NAMES)}, found {joint_names}")
+    robot = meta.get("robot", "so101")
+    require(robot == "so101", meta_path, f"robot: only 'so101' is supported, found {robot!r}")
+    for key in ("gt_source", "model"):
+        require(isinstance(meta.get(key, {}), dict), meta_path, f"{key}: expected an object")
+    session = Session(
+        root=root,
+        name=str(meta.get("name", root.name)),
+        robot=robot,
+        units=units,
+        joint_names=joint_names,
+        gt_source=dict(meta.get("gt_source", {})),
+        model=dict(meta.get("model", {})),
+    )
+    rollouts_dir = root / ROLLOUTS_DIR
+    if rollouts_dir.is_dir():
+        for child in sorted(rollouts_dir.iterdir()):
+            if child.name.startswith(".") or not child.is_dir():
+                continue  # temporary directories of a write in progress
+            try:
+                rollout = load_rollout(child, units)
+                rollout.session = session
+                session.rollouts[child.name] = rollout
+            except InspectorError as exc:
+                session.errors[child.name] = exc
+    return session
+
+
+def load_rollout(root: str | Path, units: Units | None = None) -> Rollout:
+    """Read and validate one rollout directory.
+
+    Args:
+        root: ``rollouts/<tag>``.
+        units: the session's units (default: read the parent session, else degrees).
+
+    Raises:
+        InspectorError: naming the file and the field at fault.
+    """
+    root = Path(root)
+    meta_path = root / ROLLOUT_FILE
+    meta = read_json_object(meta_path)
+    if units is None:
+        parent = root.parent.parent / SESSION_FILE
+        units = Units()
+        if parent.is_file():
+            try:
+                units = parse_units(read_json_object(parent).get("units", {}), "units")
+            except ValueError as exc:
+                raise InspectorError(parent, str(exc)) from None
+
+    def get(key: str, kind: type | tuple[type, ...], default: Any = ...) -> Any:
+        if key not in meta:
+            require(default is not ..., meta_path, f"missing field {key!r}")
+            return default
+        value = meta[key]
+        ok = isinstance(value, kind) and not (isinstance(value, bool) and bool not in _as_tuple(kind))
+        require(ok, meta_path, f"{key}: expected {_type_names(kind)}, found {value!r}")
+        return value
+
+    kind = get("kind", str)
+    require(kind in KINDS, meta_path, f"kind: expected one of {list(KINDS)}, found {kind!r}")
+    horizon = get("horizon", int, 24)
+    executed = get("executed_per_chunk", int, 9)
+    frames_per_chunk = get("frames_per_chunk", int, 9)
+    fps = float(get("fps", (int, float), 30))
+    start_frame = get("start_frame", int, 0)
+    episode_index = get("episode_index", (int, type(None)), None)
+    for name, value in (("horizon", horizon), ("executed_per_chunk", executed),
+                        ("frames_per_chunk", frames_per_chunk)):
+        require(value >= 1, meta_path, f"{name}: must be >= 1, found {value}")
+    require(executed <= horizon, meta_path,
+            f"executed_per_chunk: {executed} exceeds horizon {horizon}")
+    require(np.isfinite(fps) and fps > 0, meta_path, f"fps: must be > 0, found {fps}")
+    require(start_frame >= 0, meta_path, f"start_frame: must be >= 0, found {start_frame}")
+    views = get("views", list, [])
+    require(all(isinstance(v, str) and _VIEW.match(v) for v in views), meta_path,
+            f"views: expected names like 'front', found {views}")
+    gt = get("gt", dict, {})
+    gt_views = gt.get("views", [])
+    require(isinstance(gt_views, list) and all(isinstance(v, str) and _VIEW.match(v) for v in gt_views),
+            meta_path, f"gt.views: expected names like 'front', found {gt_views}")
+    gt_len = gt.get("episode_length")
+    require(gt_len is None or (isinstance(gt_len, int) and gt_len > 0), meta_path,
+            f"gt.episode_length: expected a positive integer, found {gt_len!r}")
+
+    actions = load_array(root / ACTIONS_FILE, ("n_chunks", horizon, len(JOINT_NAMES)))
+    require(actions.shape[0] >= 1, root / ACTIONS_FILE, "no chunks (shape[0] == 0)")
+    if kind == "single_chunk":
+        require(actions.shape[0] == 1, root / ACTIONS_FILE,
+                f"single_chunk rollout: expected 1 chunk, found {actions.shape[0]}")
+    states = None
+    if (root / STATES_FILE).exists():
+        states = load_array(root / STATES_FILE, (actions.shape[0] + 1, len(JOINT_NAMES)))
+    gt_actions = None
+    if (root / GT_DIR / ACTIONS_FILE).exists():
+        gt_actions = load_array(root / GT_DIR / ACTIONS_FILE, ("T", len(JOINT_NAMES)))
+    for view in views:
+        require((root / VIDEO_DIR / f"{view}.mp4").is_file(), root / VIDEO_DIR / f"{view}.mp4",
+                f"imagined video for view {view!r} not found")
+    for view in gt_views:
+        require((root / GT_DIR / VIDEO_DIR / f"{view}.mp4").is_file(),
+                root / GT_DIR / VIDEO_DIR / f"{view}.mp4", f"GT video for view {view!r} not found")
+    prompt = get("prompt", str, "")
+    extra = get("extra", dict, {})
+    return Rollout(
+        root=root, tag=root.name, kind=kind, prompt=prompt, episode_index=episode_index,
+        start_frame=start_frame, fps=fps, horizon=horizon, executed_per_chunk=executed,
+        frames_per_chunk=frames_per_chunk, views=list(views), units=units, actions=actions,
+        states=states, gt_actions=gt_actions, gt_views=list(gt_views), gt_episode_length=gt_len,
+        extra=extra,
+    )
+
+
+def load_array(path: Path, shape: tuple[int | str, ...]) -> npt.NDArray[np.float64]:
+    """Load a numeric ``.npy`` and check its shape and values.
+
+    Args:
+        path: the file.
+        shape: expected shape; a string entry (e.g. ``"n_chunks"``) matches any size.
+
+    Returns:
+        float64 array.
+    """
+    if not path.is_file():
+        raise InspectorError(path, "file not found")
+    try:
+        arr = np.load(path, allow_pickle=False)
+    except Exception as exc:
+        raise InspectorError(path, f"not a readable .npy array ({type(exc).__name__}: {exc})") from None
+    require(isinstance(arr, np.ndarray) and arr.dtype.kind in "fiu", path,
+            f"expected a numeric array, found dtype {getattr(arr, 'dtype', type(arr).__name__)}")
+    pattern = "(" + ", ".join(str(s) for s in shape) + ")"
+    require(arr.ndim == len(shape) and all(isinstance(e, str) or e == a for e, a in zip(shape, arr.shape)),
+            path, f"shape: expected {pattern}, found {tuple(arr.shape)}")
+    arr = arr.astype(np.float64, copy=False)
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        where = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise InspectorError(path, f"non-finite value {arr[where]} at index {list(where)}")
+    return arr
+
+
+def _as_tuple(kind: type | tuple[type, ...]) -> tuple[type, ...]:
+    return kind if isinstance(kind, tuple) else (kind,)
+
+
+def _type_names(kind: type | tuple[type, ...]) -> str:
+    names = {"NoneType": "null", "str": "a string", "int": "an integer", "float": "a number",
+             "list": "a list", "dict": "an object"}
+    return " or ".join(names.get(k.__name__, k.__name__) for k in _as_tuple(kind))
+
+
+# ----------------------------------------------------------------------------------------------
+# Writing
+
+
+def write_json_atomic(path: Path, data: Any) -> None:
+    """Write JSON so that the file is either the old one or the complete new one."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(data, fh, indent=2, allow_nan=False)
+            fh.write("\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _replace_dir(staged: Path, dest: Path, overwrite: bool) -> None:
+    """Move a complete staged directory to ``dest``; an old ``dest`` goes only once the new is in."""
+    if dest.exists():
+        if not overwrite and any(dest.iterdir()):
+            raise InspectorError(dest, "already exists (pass overwrite=True / --overwrite to replace it)")
+        trash = dest.with_name(f".{dest.name}.old-{os.getpid()}")
+        os.replace(dest, trash)
+        os.replace(staged, dest)
+        shutil.rmtree(trash, ignore_errors=True)
+    else:
+        os.replace(staged, dest)
+
+
+class SessionWriter:
+    """Writes a session. What an evaluation script calls.
+
+    Usage::
+
+        from inspector.session import SessionWriter
+
+        with SessionWriter.create("sessions/my_eval", name="my eval",
+                                  model={"name": "my-wam", "checkpoint": "step-72000"},
+                                  dataset="~/.cache/huggingface/lerobot/me/so101_pick") as session:
+            session.add_rollout("ep000", kind="autoregressive", actions=chunks,   # (60, 24, 6)
+                                episode_index=0, start_frame=0, prompt="Pick the red cube",
+                                videos={"front": frames})                          # (540, H, W, 3)
+
+    A new session appears at its path only when the ``with`` block ends without error.
+    """
+
+    def __init__(self, root: Path, final: Path | None, units: Units, overwrite: bool = False):
+        self.root = root  # where files are written now
+        self._final = final  # where a new session lands on commit (None: appending in place)
+        self.units = units
+        self._overwrite = overwrite
+        self.tags: list[str] = []
+
+    @classmethod
+    def create(cls, dest: str | Path, *, name: str | None = None, units: Units = Units(),
+               model: Mapping[str, Any] | None = None, dataset: str | Path | None = None,
+               repo_id: str | None = None, overwrite: bool = False) -> "SessionWriter":
+        """Start a new session at ``dest`` (staged in a temporary sibling until committed)."""
+        dest = Path(dest)
+        if dest.exists() and not overwrite and (not dest.is_dir() or any(dest.iterdir())):
+            raise InspectorError(dest, "already exists (pass overwrite=True / --overwrite to replace it)")
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        staged = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".partial", dir=dest.parent))
+        gt_source: dict[str, Any] = {}
+        if dataset is not None:
+            gt_source["dataset"] = str(dataset)
+        if repo_id is not None:
+            gt_source["repo_id"] = repo_id
+        write_json_atomic(staged / SESSION_FILE, {
+            "schema": SCHEMA,
+            "name": name or dest.name,
+            "robot": "so101",
+            "units": units.to_json(),
+            "joint_names": list(JOINT_NAMES),
+            "gt_source": gt_source,
+            "model": dict(model or {}),
+        })
+        (staged / ROLLOUTS_DIR).mkdir()
+        return cls(staged, dest, units, overwrite)
+
+    @classmethod
+    def append(cls, root: str | Path) -> "SessionWriter":
+        """Add rollouts to an existing session; each rollout appears atomically."""
+        session = open_session(root)
+        return cls(Path(root), None, session.units)
+
+    def __enter__(self) -> "SessionWriter":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.commit()
+        else:
+            self.abort()
+
+    def commit(self) -> Path:
+        """Move a new session into place. Returns its final path."""
+        if self._final is None:
+            return self.root
+        _replace_dir(self.root, self._final, self._overwrite)
+        self.root, self._final = self._final, None
+        return self.root
+
+    def abort(self) -> None:
+        """Drop a new session that was not committed (nothing appears at its path)."""
+        if self._final is not None:
+            shutil.rmtree(self.root, ignore_errors=True)
+
+    def add_rollout(
+        self,
+        tag: str,
+        *,
+        kind: RolloutKind,
+        actions: npt.ArrayLike,
+        prompt: str = "",
+        episode_index: int | None = None,
+        start_frame: int = 0,
+        fps: float = 30.0,
+        executed_per_chunk: int = 9,
+        frames_per_chunk: int = 9,
+        states: npt.ArrayLike | None = None,
+        videos: Mapping[str, Any] | None = None,
+        gt_actions: npt.ArrayLike | None = None,
+        gt_videos: Mapping[str, Any] | None = None,
+        gt_episode_length: int | None = None,
+        extra: Mapping[str, Any] | None = None,
+        overwrite: bool = False,
+    ) -> Path:
+        """Write one rollout (validated by reading it back before it becomes visible).
+
+        Args:
+            tag: directory name, letters/digits/``_.-``.
+            kind: ``"single_chunk"`` or ``"autoregressive"``.
+            actions: (n_chunks, horizon, 6) predicted chunks in the session's units.
+            states: optional (n_chunks + 1, 6) state before each chunk.
+            videos: ``{view: frames (N, H, W, 3) uint8 | path to a video}``; paths are copied if
+                already H.264, otherwise re-encoded.
+            gt_actions: optional (T, 6) GT joints from ``start_frame`` on.
+            gt_videos: optional ``{view: frames | path}``; frame i at imagined frame i's time.
+            gt_episode_length: length of the real episode [frames], when known.
+            extra: provenance and reference values to keep (JSON-serialisable).
+
+        Returns:
+            The rollout directory.
+        """
+        if not _TAG.match(tag):
+            raise InspectorError(tag, "rollout tag must be 1-128 letters, digits or _.- (not starting with . _ -)")
+        dest = self.root / ROLLOUTS_DIR / tag
+        if tag in self.tags or (dest.exists() and not overwrite):
+            raise InspectorError(dest, f"rollout {tag!r} already exists in this session")
+        actions_arr = np.asarray(actions, dtype=np.float64)
+        staged = Path(tempfile.mkdtemp(prefix=f".{tag}.", suffix=".partial", dir=self.root / ROLLOUTS_DIR))
+        try:
+            np.save(staged / ACTIONS_FILE, actions_arr)
+            if states is not None:
+                np.save(staged / STATES_FILE, np.asarray(states, dtype=np.float64))
+            if gt_actions is not None:
+                (staged / GT_DIR).mkdir()
+                np.save(staged / GT_DIR / ACTIONS_FILE, np.asarray(gt_actions, dtype=np.float64))
+            for view, src in (videos or {}).items():
+                _write_video(staged / VIDEO_DIR / f"{view}.mp4", src, fps)
+            for view, src in (gt_videos or {}).items():
+                _write_video(staged / GT_DIR / VIDEO_DIR / f"{view}.mp4", src, fps)
+            meta: dict[str, Any] = {
+                "kind": kind,
+                "prompt": prompt,
+                "episode_index": episode_index,
+                "start_frame": int(start_frame),
+                "fps": float(fps),
+                "horizon": int(actions_arr.shape[1]) if actions_arr.ndim == 3 else 0,
+                "executed_per_chunk": int(executed_per_chunk),
+                "frames_per_chunk": int(frames_per_chunk),
+                "views": sorted(videos or {}),
+                "gt": {"views": sorted(gt_videos or {}), "episode_length": gt_episode_length},
+                "units": self.units.to_json(),
+            }
+            if extra:
+                meta["extra"] = dict(extra)
+            write_json_atomic(staged / ROLLOUT_FILE, meta)
+            load_rollout(staged, self.units)  # validate before it becomes visible
+            _replace_dir(staged, dest, overwrite)
+        except BaseException:
+            shutil.rmtree(staged, ignore_errors=True)
+            raise
+        self.tags.append(tag)
+        return dest
+
+
+def _write_video(dest: Path, src: Any, fps: float) -> None:
+    from .video import decode, probe
+
+    if isinstance(src, (str, Path)):
+        info = probe(src)
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        if info.codec == "h264":
+            shutil.copyfile(src, dest)
+            return
+        src = decode(src)[0]
+    frames = np.asarray(src)
+    if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8:
+        raise InspectorError(dest, f"video frames: expected (N, H, W, 3) uint8, found {frames.shape} {frames.dtype}")
+    encode_h264(dest, frames, fps)
