@@ -93,8 +93,8 @@ def best_match(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, npt.NDArr
         (drift, index): (..., T) ``min_j d(pred(t), gt_j)`` and its argmin j (the GT frame the
         arm "is at").
     """
-    p = torch.as_tensor(np.asarray(pred, np.float64))
-    g = torch.as_tensor(np.asarray(gt, np.float64))
+    p = torch.as_tensor(np.ascontiguousarray(pred, np.float64))
+    g = torch.as_tensor(np.ascontiguousarray(gt, np.float64))
     squeeze = p.ndim == 2
     if squeeze:
         p = p[None]
@@ -156,8 +156,8 @@ def dtw(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, Array]:
         (drift, cost): (..., T) mean distance of the GT samples aligned to each predicted sample,
         and (...,) total alignment cost divided by the path length.
     """
-    p = torch.as_tensor(np.asarray(pred, np.float64))
-    g = torch.as_tensor(np.asarray(gt, np.float64))
+    p = torch.as_tensor(np.ascontiguousarray(pred, np.float64))
+    g = torch.as_tensor(np.ascontiguousarray(gt, np.float64))
     squeeze = p.ndim == 2
     if squeeze:
         p = p[None]

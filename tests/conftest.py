@@ -16,3 +16,19 @@ def fixtures_dir() -> Path:
     if not FIXTURES_DIR.is_dir():
         pytest.skip(f"shared fixtures not found at {FIXTURES_DIR}")
     return FIXTURES_DIR
+
+
+@pytest.fixture(scope="session")
+def dreamzero_dir(fixtures_dir: Path) -> Path:
+    """Real DreamZero-SO101 model outputs."""
+    return fixtures_dir / "dreamzero_so101"
+
+
+@pytest.fixture(scope="session")
+def imported_session(dreamzero_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Every DreamZero-SO101 fixture imported once into a native session (read-only for tests)."""
+    from inspector.importers.dreamzero_so101 import import_dreamzero
+
+    dest = tmp_path_factory.mktemp("imported") / "dz"
+    import_dreamzero(dreamzero_dir, dest, log=lambda _: None)
+    return dest

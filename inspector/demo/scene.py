@@ -23,8 +23,11 @@ arm joints in degrees (zero = middle of range, as the MuJoCo model's radians), g
 from __future__ import annotations
 
 import os
+import sys
 
-# Must precede `import mujoco`: the backend is bound at import time.
+# Must precede `import mujoco`: the backend is bound at import time. If mujoco was imported
+# earlier, whatever it bound then stays (remembered for the error message).
+_MUJOCO_IMPORTED_BEFORE = "mujoco" in sys.modules
 os.environ.setdefault("MUJOCO_GL", "osmesa")
 if os.environ["MUJOCO_GL"] == "osmesa":
     os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
@@ -413,6 +416,7 @@ class DemoScene:
         self.width, self.height, self.shadows = width, height, shadows
         m = self.model
         # Map dataset columns to MuJoCo by name, never by position.
+        self._joint_ids = np.array([m.joint(j).id for j in JOINT_NAMES])
         self._qpos_adr = np.array([m.joint(j).qposadr[0] for j in JOINT_NAMES])
         self._dof_adr = np.array([m.joint(j).dofadr[0] for j in JOINT_NAMES])
         self._ctrl_ids = np.array([m.actuator(j).id for j in JOINT_NAMES])
@@ -420,15 +424,14 @@ class DemoScene:
         self._cube_qpos = {c: m.joint(c).qposadr[0] for c in CUBES}
         self._weld_ids = {c: m.equality(f"hold_{c}").id for c in CUBES}
         self._bowl_mocap = m.body("bowl").mocapid[0]
-        self._renderers: dict[str, mujoco.Renderer] = {}
-        self._ik_data = mujoco.MjData(m)
-        self._joint_ids = np.array([m.joint(j).id for j in JOINT_NAMES])
         self._gripper_body = m.body("gripper").id
         self._site_rot = _site_rotation(m, "gripperframe")
         self._grasp_offset = _grasp_offset(m)
         self._pan_sign = _pan_sign(m)
-        # Rendering a kinematic pose must not disturb the physics state: it has its own data.
+        # Kinematic rendering and IK must not disturb the physics state: each has its own data.
         self._pose_data = mujoco.MjData(m)
+        self._ik_data = mujoco.MjData(m)
+        self._renderers: dict[str, mujoco.Renderer] = {}
         self.layout = Layout()
         self.reset(self.layout)
 
@@ -469,7 +472,16 @@ class DemoScene:
         if camera not in CAMERAS:
             raise ValueError(f"unknown camera {camera!r}; cameras: {list(CAMERAS)}")
         if camera not in self._renderers:
-            self._renderers[camera] = mujoco.Renderer(self.model, self.height, self.width)
+            try:
+                self._renderers[camera] = mujoco.Renderer(self.model, self.height, self.width)
+            except Exception as exc:  # GL setup fails with many types (FatalError, OSError...)
+                backend = ("bound before this module was imported" if _MUJOCO_IMPORTED_BEFORE
+                           else repr(os.environ.get("MUJOCO_GL")))
+                raise RuntimeError(
+                    f"cannot render offscreen (MuJoCo GL backend {backend}: {exc}); install Debian "
+                    "libosmesa6 and pyopengl, and set MUJOCO_GL=osmesa (or egl on a GPU host) in "
+                    "the environment or import inspector.demo.scene before mujoco"
+                ) from exc
         return self._renderers[camera]
 
     def _draw(self, data: mujoco.MjData, camera: str) -> npt.NDArray[np.uint8]:
@@ -526,7 +538,8 @@ class DemoScene:
 
         At each frame k the state is measured, the cameras render, then ``action[k]`` (the
         smooth command at that time) is written to the actuators and held for 1/fps s of
-        physics. The arm starts at rest on the first waypoint.
+        physics. The arm starts at rest on the first waypoint. The model's time step becomes
+        1/(fps * n) s, the nearest to 2 ms, so frames fall exactly on physics steps.
 
         Args:
             waypoints: the script (see :class:`Waypoint`, :func:`pick_motion`).
@@ -534,8 +547,8 @@ class DemoScene:
             layout: where the objects start; defaults to the current layout.
             cameras: cameras to render each frame; () for state only (fast).
             grasp_assist: when the jaws have closed on a cube, weld it to the gripper until they
-                open. Physics alone usually holds it; the weld makes the demo certain not to drop
-                it (a slipping cube would spoil the ground truth).
+                open. Physics alone holds the cube in the scripted tasks (the fingertip pads
+                pinch it); the weld makes certain a demo never drops it.
             settle_s: physics run before the first frame [s], so the cubes rest on the table.
 
         Returns:
@@ -544,7 +557,6 @@ class DemoScene:
         times, action, phase = commanded_trajectory(waypoints, fps)
         self.reset(layout, action[0])
         m, d = self.model, self.data
-        # Integer substeps per frame near the model's 2 ms step, so frames fall on steps exactly.
         n_sub = int(np.ceil(1.0 / fps / 0.002))
         m.opt.timestep = 1.0 / fps / n_sub
         for _ in range(int(settle_s / m.opt.timestep)):

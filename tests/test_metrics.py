@@ -1,0 +1,177 @@
+"""Metrics against known answers: the seed report's metas and synthetic paths with planted faults."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from inspector import metrics
+from inspector.kinematics import kinematics
+from inspector.session import SessionWriter, open_session
+from inspector.timeline import build_timeline
+from inspector.units import Units
+
+
+def _smooth_path(n: int, seed: int = 0) -> np.ndarray:
+    """(n, 6) a smooth, non-repeating joint path in degrees / gripper 0..100."""
+    t = np.linspace(0, 1, n)[:, None]
+    rng = np.random.default_rng(seed)
+    amp = rng.uniform(20, 40, 6)
+    return np.array([0, -60, 60, 40, 0, 30]) + amp * np.sin(np.pi * t * rng.uniform(0.6, 0.9, 6) + rng.uniform(0, 0.5, 6))
+
+
+def _timeline(tmp_path, pred_executed: np.ndarray, gt: np.ndarray, horizon: int = 24, executed: int = 9):
+    n_chunks = len(pred_executed) // executed
+    chunks = np.zeros((n_chunks, horizon, 6))
+    for k in range(n_chunks):
+        idx = np.minimum(k * executed + np.arange(horizon), len(pred_executed) - 1)
+        chunks[k] = pred_executed[idx]
+    with SessionWriter.create(tmp_path / "s") as w:
+        w.add_rollout("r", kind="autoregressive", actions=chunks, gt_actions=gt, executed_per_chunk=executed)
+    return build_timeline(open_session(tmp_path / "s").rollouts["r"])
+
+
+def test_reference_chunk_metrics_reproduce_the_metas_exactly(imported_session):
+    s = open_session(imported_session)
+    checked = 0
+    for tag in ["f000", "f084", "f169", "train_ep0"]:
+        r = s.rollouts[tag]
+        ref = r.extra["reference_metrics"]
+        ce = build_timeline(r).chunk_errors
+        assert ce.rmse == pytest.approx(ref["action_rmse_deg"], abs=1e-6)
+        np.testing.assert_allclose(ce.per_joint_rmse, ref["per_joint_rmse"], atol=1e-6)
+        np.testing.assert_allclose(ce.per_step_mse, ref["per_step_mse"], atol=1e-6)
+        checked += 1
+    assert checked == 4
+
+
+def test_video_psnr_front_f084_matches_meta(imported_session):
+    r = open_session(imported_session).rollouts["f084"]
+    psnr = build_timeline(r).video_metrics("front").mean_psnr_db
+    assert psnr == pytest.approx(r.extra["reference_metrics"]["video_psnr_db"], abs=0.3)
+
+
+def test_raw_60_chunk_rollouts_leave_the_joint_limits(imported_session):
+    s = open_session(imported_session)
+    for tag in ["ep000_train", "ep000_novel"]:
+        tl = build_timeline(s.rollouts[tag])
+        by_joint = tl.limit_violation.sum(axis=0)
+        assert by_joint.sum() > 0
+        assert by_joint[5] > 0  # the gripper goes far below 0 (about -115)
+        assert tl.pred.min() < -100 and not tl.has_gt_joints
+
+
+def test_tempo_mismatch_is_speed_not_path(tmp_path):
+    gt = _smooth_path(600)
+    t = np.arange(540)
+    slow = np.stack([np.interp(0.8 * t, np.arange(600), gt[:, j]) for j in range(6)], axis=1)
+    tl = _timeline(tmp_path, slow, gt)
+    assert tl.best_match_drift.mean() < 0.5
+    assert tl.time_aligned_drift.mean() > 10 * tl.best_match_drift.mean()
+    assert tl.tempo == pytest.approx(0.8, abs=0.05)
+    assert tl.speed_mismatch.mean() > tl.path_error.mean()
+
+
+def test_constant_bias_gives_both_drifts_about_b(tmp_path):
+    gt = _smooth_path(600)
+    biased = gt[:540].copy()
+    biased[:, 2] += 5.0
+    tl = _timeline(tmp_path, biased, gt)
+    assert np.median(tl.time_aligned_drift) == pytest.approx(5.0, abs=1e-6)
+    assert np.median(tl.best_match_drift) == pytest.approx(5.0, abs=0.5)
+    assert tl.tempo == pytest.approx(1.0, abs=0.05)
+
+
+def test_reverse_order_is_penalised_by_dtw_not_best_match():
+    gt = _smooth_path(300)
+    forward_drift, forward_cost = metrics.dtw(gt, gt)
+    reverse = gt[::-1]
+    bm, _ = metrics.best_match(reverse, gt)
+    reverse_drift, reverse_cost = metrics.dtw(reverse, gt)
+    assert bm.max() < 1e-9  # every pose is on the path
+    assert forward_cost < 1e-9 and reverse_cost > 10.0
+    assert reverse_drift.mean() > 10.0
+
+
+def test_dtw_batched_equals_single():
+    gt = _smooth_path(80)
+    preds = np.stack([gt + 1.0, gt[::-1], gt * 1.1])
+    d_batch, c_batch = metrics.dtw(preds, gt)
+    for i in range(3):
+        d, c = metrics.dtw(preds[i], gt)
+        np.testing.assert_allclose(d_batch[i], d)
+        assert c_batch[i] == pytest.approx(c)
+
+
+def test_ee_error_of_pure_wrist_roll_offset_is_what_fk_predicts(tmp_path):
+    gt = _smooth_path(600)
+    pred = gt[:540].copy()
+    pred[:, 4] += 20.0
+    tl = _timeline(tmp_path, pred, gt)
+    fk = kinematics()
+    expected = np.linalg.norm(fk.gripper_positions(pred, Units()) - fk.gripper_positions(gt[:540], Units()), axis=1) * 1000
+    np.testing.assert_allclose(tl.ee_error_mm, expected, atol=1e-9)
+    assert 0 < tl.ee_error_mm.max() < 20  # the tool point sits close to the roll axis
+
+
+def test_post_episode_samples_are_marked(tmp_path):
+    gt = _smooth_path(300)
+    pred = np.concatenate([gt, np.repeat(gt[-1:], 240, axis=0)])
+    tl = _timeline(tmp_path, pred, gt)
+    assert tl.post_episode.sum() == 240 and tl.episode_end_step == 300
+    assert tl.time_aligned_drift[300:].max() < 1e-9  # clamped to the last GT frame
+
+
+def test_prompt_divergence_finds_the_collapse():
+    base = _smooth_path(540)
+    other = base.copy()
+    other[:18] += 15.0  # apart for two chunks of 9 steps, then the same path
+    _, per_chunk, collapse = metrics.prompt_divergence(base, other, 9)
+    assert per_chunk[:2].min() > 10 and per_chunk[2:].max() == 0 and collapse == 2
+
+
+def test_limit_violations_per_joint():
+    limits = np.array([[-10, 10]] * 6, dtype=float)
+    v = np.zeros((4, 6))
+    v[1, 5] = -115
+    v[2, 1] = 11
+    assert metrics.limit_violations(v, limits).sum(axis=0).tolist() == [0, 1, 0, 0, 0, 1]
+
+
+def test_psnr_and_ssim_identical_and_noisy():
+    rng = np.random.default_rng(0)
+    a = rng.integers(0, 255, size=(3, 40, 50, 3), dtype=np.uint8)
+    assert metrics.ssim(a, a) == pytest.approx([1, 1, 1])
+    noisy = np.clip(a.astype(int) + rng.normal(0, 10, a.shape), 0, 255).astype(np.uint8)
+    p = metrics.psnr(a, noisy)
+    assert np.all((p > 25) & (p < 30))
+    noisier = np.clip(a.astype(int) + rng.normal(0, 60, a.shape), 0, 255).astype(np.uint8)
+    s_low, s_high = metrics.ssim(a, noisy), metrics.ssim(a, noisier)
+    assert np.all(s_low < 1.0) and np.all(s_high < s_low - 0.1)
+
+
+def test_aggregate():
+    agg = metrics.aggregate([3.0, 1.0, 2.0, np.nan])
+    assert agg == {"n": 3, "mean": 2.0, "median": 2.0, "best": 1.0, "worst": 3.0}
+
+
+def test_report_json_on_fixtures(dreamzero_dir):
+    out = subprocess.run([sys.executable, "-m", "inspector", "report", str(dreamzero_dir), "--json"],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    report = json.loads(out.stdout)
+    rows = {r["tag"]: r for r in report["rollouts"]}
+    assert rows["f084"]["rmse_deg"] == pytest.approx(1.5735122747236143, abs=1e-6)
+    assert rows["ep000_train"]["time_aligned_drift"] is None  # no GT joints stored with it
+    assert rows["ep000_train"]["limit_violations"]["count"] > 0
+    assert rows["ep000_train"]["post_episode_chunks"] == 23  # 540 steps on a 328-frame episode
+    assert set(rows["ep000_train"]["video_psnr_db"]) == {"front", "gripper", "top"}
+    assert report["aggregate"]["n"] == 6 and report["aggregate"]["best_rmse_deg"] == pytest.approx(0.5694685, abs=1e-6)
+    for key in ["tag", "kind", "prompt", "episode_index", "rmse_deg", "per_joint_rmse", "per_step_mse",
+                "time_aligned_drift", "best_match_drift", "dtw_drift", "tempo", "ee_error_mm",
+                "limit_violations", "video_psnr_db", "post_episode_chunks"]:
+        assert key in rows["f084"]

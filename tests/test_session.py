@@ -1,0 +1,164 @@
+"""Native session format: writer API, validation, atomic writes, DreamZero-SO101 importer, info."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from inspector.errors import InspectorError
+from inspector.session import SessionWriter, load_rollout, open_session
+
+
+def _write_small_session(root: Path, **kwargs) -> Path:
+    rng = np.random.default_rng(0)
+    frames = rng.integers(0, 255, size=(18, 32, 48, 3), dtype=np.uint8)
+    with SessionWriter.create(root, model={"name": "m"}, **kwargs) as w:
+        w.add_rollout("a", kind="autoregressive", actions=rng.normal(size=(2, 24, 6)),
+                      prompt="Pick", episode_index=0, videos={"front": frames},
+                      gt_actions=rng.normal(size=(30, 6)))
+        w.add_rollout("b", kind="single_chunk", actions=rng.normal(size=(1, 24, 6)))
+    return root
+
+
+def test_writer_round_trip(tmp_path):
+    root = _write_small_session(tmp_path / "s")
+    s = open_session(root)
+    assert sorted(s.rollouts) == ["a", "b"] and not s.errors
+    a = s.rollouts["a"]
+    assert a.actions.shape == (2, 24, 6) and a.gt_actions.shape == (30, 6)
+    assert a.executed_actions().shape == (18, 6)
+    assert len(a.video("front")) == 18
+    assert not list(tmp_path.glob(".*partial"))
+
+
+def test_failed_create_leaves_nothing(tmp_path):
+    dest = tmp_path / "s"
+    with pytest.raises(InspectorError):
+        with SessionWriter.create(dest) as w:
+            w.add_rollout("a", kind="autoregressive", actions=np.zeros((2, 24, 5)))  # wrong joint count
+    assert not dest.exists()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_existing_session_is_never_replaced_by_a_failed_one(tmp_path):
+    root = _write_small_session(tmp_path / "s")
+    before = (root / "session.json").read_text()
+    with pytest.raises(InspectorError):
+        with SessionWriter.create(root, overwrite=True) as w:
+            w.add_rollout("x", kind="nonsense", actions=np.zeros((1, 24, 6)))  # type: ignore[arg-type]
+    assert (root / "session.json").read_text() == before
+    assert sorted(open_session(root).rollouts) == ["a", "b"]
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda r: np.save(r / "actions.npy", np.zeros((2, 24, 5))), "shape: expected (n_chunks, 24, 6), found (2, 24, 5)"),
+    (lambda r: np.save(r / "actions.npy", np.full((2, 24, 6), np.nan)), "non-finite"),
+    (lambda r: (r / "actions.npy").write_bytes(b"\x93NUMPY garbage"), "not a readable .npy"),
+    (lambda r: (r / "rollout.json").write_text("{nope"), "invalid JSON"),
+    (lambda r: (r / "rollout.json").write_text("[]"), "expected a JSON object"),
+    (lambda r: (r / "video" / "front.mp4").unlink(), "not found"),
+    (lambda r: _edit(r, kind="sideways"), "kind: expected one of"),
+    (lambda r: _edit(r, executed_per_chunk=30), "exceeds horizon"),
+])
+def test_bad_rollout_names_file_and_field_and_spares_the_others(tmp_path, mutate, message):
+    root = _write_small_session(tmp_path / "s")
+    mutate(root / "rollouts" / "a")
+    s = open_session(root)
+    assert "b" in s.rollouts  # one bad rollout never takes the others down
+    err = str(s.errors["a"])
+    assert message in err and str(root / "rollouts" / "a") in err and "\n" not in err
+
+
+def _edit(rollout_dir: Path, **fields) -> None:
+    meta = json.loads((rollout_dir / "rollout.json").read_text())
+    meta.update(fields)
+    (rollout_dir / "rollout.json").write_text(json.dumps(meta))
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.dictionaries(st.sampled_from(["kind", "horizon", "executed_per_chunk", "frames_per_chunk", "fps",
+                                        "start_frame", "episode_index", "views", "gt", "prompt", "extra"]),
+                       st.one_of(st.none(), st.booleans(), st.integers(-5, 50), st.floats(allow_nan=True),
+                                 st.text(max_size=5), st.lists(st.text(max_size=3), max_size=2),
+                                 st.dictionaries(st.text(max_size=3), st.integers(), max_size=2))))
+def test_reader_property_any_metadata_gives_a_rollout_or_a_clear_error(tmp_path_factory, fields):
+    root = tmp_path_factory.mktemp("p")
+    np.save(root / "actions.npy", np.zeros((1, 24, 6)))
+    (root / "rollout.json").write_text(json.dumps({"kind": "single_chunk", **fields}))
+    try:
+        r = load_rollout(root)
+        assert r.actions.shape[0] == 1
+    except InspectorError as exc:
+        assert str(root) in str(exc) and "\n" not in str(exc)
+
+
+def test_importer_reads_every_fixture_dir(imported_session):
+    s = open_session(imported_session)
+    assert not s.errors
+    assert sorted(s.rollouts) == ["ep000_novel", "ep000_train", "f000", "f084", "f169", "train_ep0"]
+    train = s.rollouts["ep000_train"]
+    assert train.kind == "autoregressive" and train.actions.shape == (60, 24, 6)
+    assert train.views == ["front", "gripper", "top"] and train.gt_views == ["front", "gripper", "top"]
+    assert train.extra["chained_states"] is True  # state_trace[k+1] == action_trace[k][8]
+    np.testing.assert_array_equal(train.states[1:], train.actions[:, 8])
+    assert train.executed_actions().shape == (540, 6)
+    assert train.gt_episode_length == 328 and train.prompt == "Pick the red cube"
+    f084 = s.rollouts["f084"]
+    assert f084.kind == "single_chunk" and f084.start_frame == 84 and f084.gt_actions.shape == (24, 6)
+    mosaic = s.rollouts["train_ep0"]  # GT only as a 2x2 mosaic: cut into views
+    assert mosaic.gt_views == ["front", "gripper", "top"]
+    # each mosaic quarter is one view; GT is decoded at the imagined clip's size for comparison
+    assert mosaic.video("front", gt=True).frames.shape == mosaic.video("front").frames.shape
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "inspector", *args], capture_output=True, text=True, timeout=300)
+
+
+def test_cli_import_prints_one_line_per_rollout(dreamzero_dir, tmp_path):
+    out = _cli("import", "dreamzero-so101", str(dreamzero_dir / "train_rollout"), "-o", str(tmp_path / "s"))
+    assert out.returncode == 0, out.stderr
+    lines = [l for l in out.stdout.splitlines() if l.startswith("ep000_")]
+    assert len(lines) == 2 and "60 chunk(s) x 24 steps" in lines[0]
+
+
+def test_cli_bad_input_is_one_line_exit_2(tmp_path):
+    out = _cli("import", "dreamzero-so101", str(tmp_path / "missing"), "-o", str(tmp_path / "s"))
+    assert out.returncode == 2
+    assert out.stderr.startswith("error: ") and out.stderr.count("\n") == 1 and "Traceback" not in out.stderr
+    assert not (tmp_path / "s").exists()
+
+
+def test_failed_import_leaves_no_partial_session(dreamzero_dir, tmp_path):
+    src = tmp_path / "src"
+    import shutil
+    shutil.copytree(dreamzero_dir / "zeroshot_chunk", src)
+    meta = json.loads((src / "f169" / "meta.json").read_text())
+    meta["actions_pred"] = meta["actions_pred"][:3] + [[1, 2, 3]]
+    (src / "f169" / "meta.json").write_text(json.dumps(meta))
+    out = _cli("import", "dreamzero-so101", str(src), "-o", str(tmp_path / "s"))
+    assert out.returncode == 2 and "f169/meta.json" in out.stderr and "actions_pred" in out.stderr
+    assert not (tmp_path / "s").exists() and not list(tmp_path.glob(".s.*"))
+
+
+def test_cli_info_json_session_and_dataset(imported_session, fixtures_dir):
+    out = _cli("info", str(imported_session), "--json")
+    info = json.loads(out.stdout)
+    assert info["format"] == "session"
+    by_tag = {r["tag"]: r for r in info["rollouts"]}
+    assert by_tag["ep000_train"] == {"tag": "ep000_train", "kind": "autoregressive", "n_chunks": 60, "horizon": 24,
+                                     "executed_per_chunk": 9, "views": ["front", "gripper", "top"],
+                                     "has_gt_joints": False}
+    assert by_tag["f084"]["has_gt_joints"] is True
+    info = json.loads(_cli("info", str(fixtures_dir / "lerobot" / "so101_v30"), "--json").stdout)
+    assert info["format"] == "lerobot" and info["codebase_version"] == "v3.0" and info["fps"] == 30
+    assert info["cameras"] == ["front", "wrist"] and info["robot_type"] == "so101_follower"
+    assert [e["length"] for e in info["episodes"]] == [150, 210, 240]
+    assert info["episodes"][2]["task"] == "Put the red cube on top of the blue cube"
