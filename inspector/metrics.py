@@ -102,9 +102,17 @@ def best_match(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, npt.NDArr
     # chunks of rollouts keep the (B, T, G) distance block small
     for block in torch.split(p, max(1, 2_000_000 // max(1, p.shape[1] * g.shape[0])), dim=0):
         d = torch.cdist(block, g[None].expand(block.shape[0], -1, -1), compute_mode="donot_use_mm_for_euclid_dist")
-        m = d.min(dim=-1)
-        out_d.append(m.values)
-        out_i.append(m.indices)
+        best = d.min(dim=-1).values
+        # A GT hold (the arm at rest) repeats one pose over many frames: every frame of it ties.
+        # Taking the middle of the first tied run, not its first frame, keeps the tempo fit
+        # unbiased (a later run, e.g. the same rest pose at the episode's end, is another visit).
+        tied = d <= best[..., None] + 1e-9
+        first = tied.to(torch.int8).argmax(dim=-1)
+        after_run = (~tied) & (torch.arange(g.shape[0]) > first[..., None])
+        has_end = after_run.any(dim=-1)
+        last = torch.where(has_end, after_run.to(torch.int8).argmax(dim=-1) - 1, torch.full_like(first, g.shape[0] - 1))
+        out_d.append(best)
+        out_i.append((first + last) // 2)
     drift = torch.cat(out_d).numpy()
     index = torch.cat(out_i).numpy()
     return (drift[0], index[0]) if squeeze else (drift, index)
@@ -113,22 +121,36 @@ def best_match(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, npt.NDArr
 def tempo(match_index: npt.ArrayLike, valid: npt.ArrayLike | None = None) -> Array | float:
     """Slope of matched GT time against rollout time: 1 = real speed, 0.8 = 20 % slow.
 
-    Least squares of ``match_index`` on the step number over the ``valid`` samples (by default
-    all). A prediction parked at one pose has tempo ~0.
+    A line fitted to ``match_index`` over the step number, robustly: the matched index jumps
+    whenever the path passes a pose the episode visits twice (the rest pose at its start and its
+    end), so after a least-squares fit the samples far off the line (beyond 3 robust standard
+    deviations, and at least 3 frames) are dropped and the line refitted, three times.
+    A prediction parked at one pose has tempo ~0.
 
     Args:
         match_index: (..., T) argmin indices from :func:`best_match`.
         valid: (T,) samples to fit (e.g. those before the episode's end).
     """
     j = np.asarray(match_index, np.float64)
+    squeeze = j.ndim == 1
+    j = j[None] if squeeze else j
     t = np.arange(j.shape[-1], dtype=np.float64)
-    w = np.ones_like(t) if valid is None else np.asarray(valid, np.float64)
-    if w.sum() < 2:
-        return np.full(j.shape[:-1], np.nan) if j.ndim > 1 else float("nan")
-    tm = (w * t).sum() / w.sum()
-    jm = (w * j).sum(-1, keepdims=True) / w.sum()
-    slope = (w * (t - tm) * (j - jm)).sum(-1) / (w * (t - tm) ** 2).sum()
-    return slope if j.ndim > 1 else float(slope)
+    w = np.broadcast_to(np.ones_like(t) if valid is None else np.asarray(valid, np.float64), j.shape).copy()
+    slope = np.full(j.shape[0], np.nan)
+    for _ in range(4):
+        n = w.sum(-1)
+        ok = n >= 2
+        tm = (w * t).sum(-1) / np.maximum(n, 1)
+        jm = (w * j).sum(-1) / np.maximum(n, 1)
+        dt = t - tm[:, None]
+        var = (w * dt ** 2).sum(-1)
+        slope = np.where(ok & (var > 0), (w * dt * (j - jm[:, None])).sum(-1) / np.where(var > 0, var, 1), np.nan)
+        residual = np.abs(j - (jm[:, None] + slope[:, None] * dt))
+        masked = np.where(w > 0, residual, np.nan)
+        mad = np.nanmedian(masked, axis=-1) if np.isfinite(masked).any() else np.zeros(j.shape[0])
+        keep = residual <= np.maximum(3 * 1.4826 * np.nan_to_num(mad), 3.0)[:, None]
+        w = w * keep
+    return float(slope[0]) if squeeze else slope
 
 
 def drift_split(time_aligned_drift: npt.ArrayLike, best_match_drift: npt.ArrayLike) -> tuple[Array, Array]:

@@ -140,17 +140,17 @@ def _arm_xml(assets: Path) -> str:
 
 def _bowl_xml() -> str:
     """A shallow bowl: a disc and a ring of rim segments (MuJoCo has no concave primitives)."""
-    n = 16
-    seg_half = np.pi * (BOWL_RADIUS + 0.006) / n + 0.002  # segments overlap a little: no gaps
+    n = 24
+    seg_half = np.pi * (BOWL_RADIUS + 0.006) / n + 0.001  # segments overlap a little: no gaps
     parts = ['<geom name="bowl_base" type="cylinder" size="{r} {h}" pos="0 0 {h}" '
              'material="bowl"/>'.format(r=BOWL_RADIUS + 0.006, h=BOWL_FLOOR / 2)]
     for i in range(n):
         a = 2 * np.pi * i / n
         x, y = (BOWL_RADIUS + 0.003) * np.cos(a), (BOWL_RADIUS + 0.003) * np.sin(a)
-        # Segments lean outwards by 25 degrees, which reads as a bowl rather than a tray.
+        # Segments lean outwards by 17 degrees, which reads as a bowl rather than a tray.
         parts.append(
             f'<geom type="box" size="0.003 {seg_half:.4f} {BOWL_RIM_HEIGHT / 2:.4f}" '
-            f'pos="{x:.4f} {y:.4f} {BOWL_RIM_HEIGHT / 2:.4f}" euler="0 -0.45 {a:.4f}" '
+            f'pos="{x:.4f} {y:.4f} {BOWL_RIM_HEIGHT / 2:.4f}" euler="0 -0.3 {a:.4f}" '
             'material="bowl"/>'
         )
     return "\n        ".join(parts)
@@ -193,6 +193,12 @@ def scene_xml(width: int, height: int, msaa: int) -> tuple[str, dict[str, bytes]
     <quality offsamples="{msaa}" shadowsize="1024"/>
     <map znear="0.02"/>
   </visual>
+  <default>
+    <!-- Below the table top: seen, never touched. -->
+    <default class="leg">
+      <geom material="leg" contype="0" conaffinity="0"/>
+    </default>
+  </default>
   <asset>
     <texture name="sky" type="skybox" builtin="gradient" rgb1="0.93 0.93 0.95" rgb2="0.55 0.58 0.62"
              width="32" height="256"/>
@@ -215,11 +221,11 @@ def scene_xml(width: int, height: int, msaa: int) -> tuple[str, dict[str, bytes]
     {FRONT_CAMERA.xml("front")}
     <!-- Table top at z = 0, where the arm's base stands; big enough to fill the front view. -->
     <geom name="table" type="box" pos="0.25 0 -0.02" size="0.75 0.9 0.02" material="table"/>
-    <geom type="box" pos="-0.45 -0.85 -0.39" size="0.03 0.03 0.35" material="leg" contype="0" conaffinity="0"/>
-    <geom type="box" pos="-0.45 0.85 -0.39" size="0.03 0.03 0.35" material="leg" contype="0" conaffinity="0"/>
-    <geom type="box" pos="0.95 -0.85 -0.39" size="0.03 0.03 0.35" material="leg" contype="0" conaffinity="0"/>
-    <geom type="box" pos="0.95 0.85 -0.39" size="0.03 0.03 0.35" material="leg" contype="0" conaffinity="0"/>
-    <geom name="floor" type="plane" pos="0 0 -0.74" size="3 3 0.1" material="floor" contype="0" conaffinity="0"/>
+    <geom type="box" pos="-0.45 -0.85 -0.39" size="0.03 0.03 0.35" class="leg"/>
+    <geom type="box" pos="-0.45 0.85 -0.39" size="0.03 0.03 0.35" class="leg"/>
+    <geom type="box" pos="0.95 -0.85 -0.39" size="0.03 0.03 0.35" class="leg"/>
+    <geom type="box" pos="0.95 0.85 -0.39" size="0.03 0.03 0.35" class="leg"/>
+    <geom name="floor" type="plane" pos="0 0 -0.74" size="3 3 0.1" material="floor" class="leg"/>
     <body name="bowl" mocap="true" pos="0.16 0.17 0">
         {_bowl_xml()}
     </body>{cubes}
@@ -539,7 +545,7 @@ class DemoScene:
         At each frame k the state is measured, the cameras render, then ``action[k]`` (the
         smooth command at that time) is written to the actuators and held for 1/fps s of
         physics. The arm starts at rest on the first waypoint. The model's time step becomes
-        1/(fps * n) s, the nearest to 2 ms, so frames fall exactly on physics steps.
+        1/(fps * n) s, the largest up to 2 ms, so frames fall exactly on physics steps.
 
         Args:
             waypoints: the script (see :class:`Waypoint`, :func:`pick_motion`).
@@ -686,7 +692,7 @@ class DemoScene:
             R = R_body @ self._site_rot
             p = d.xpos[self._gripper_body] + R_body @ self._grasp_offset
             # Small-angle rotation (world frame) that turns the site axes onto the wanted ones.
-            rot_err = 0.5 * (np.cross(R[:, 0], want_x) + np.cross(R[:, 1], want_y) + np.cross(R[:, 2], want_z))
+            rot_err = 0.5 * sum(np.cross(R[:, i], want) for i, want in enumerate((want_x, want_y, want_z)))
             pos_err = target - p
             if np.linalg.norm(pos_err) < 1e-5 and np.linalg.norm(rot_err) < 1e-4:
                 break

@@ -1,0 +1,232 @@
+"""Generate the bundled demo session: a MuJoCo SO-101 dataset and rollouts with planted faults.
+
+The ground truth is a small LeRobot v3.0 dataset (written by our writer in LeRobot's layout) of
+the SO-101 picking a cube and placing one in a bowl, rendered offscreen by MuJoCo. Each rollout
+replays that real path through a known distortion, so the tests know what every metric must find:
+
+======================  ==============================================================
+tag                     planted fault
+======================  ==============================================================
+tempo_0.8x              the GT path at 0.8x speed (best-match ~0, tempo ~0.8)
+bias_elbow              elbow_flex offset growing linearly to 15 deg
+limits_wrist            wrist_flex pushed to 120 deg mid-rollout, gripper below 0
+overrun_60chunks        60 chunks (540 steps) on a shorter episode: post-episode chunks
+prompt_train/novel      same start; novel veers for 2 chunks, then the same path
+single_fNNN             single chunks along an episode, error growing with the horizon
+======================  ==============================================================
+
+Imagined video is rendered from the *predicted* joints (cheap settings), then visibly degraded
+(blur, colour shift, noise, a slight wobble) so it reads as imagined.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import numpy.typing as npt
+
+from ..session import SessionWriter
+from ..units import JOINT_NAMES, Units
+
+DEMO_DIR = Path(__file__).resolve().parents[2] / "sessions" / "demo"
+DATASET_DIR = "dataset"  # inside the session directory, so the demo travels as one folder
+HORIZON, EXECUTED, FPS = 24, 9, 30.0
+SEED = 101
+
+
+@dataclass
+class _Episode:
+    task: str
+    action: npt.NDArray[np.float64]  # (T, 6)
+    state: npt.NDArray[np.float64]
+    frames: dict[str, npt.NDArray[np.uint8]]
+    objects: dict[str, npt.NDArray[np.float64]]  # name -> (T, 7)
+
+
+def rebuild_demo(out: Path | None = None, quick: bool = False, log: Callable[[str], None] = print) -> Path:
+    """Regenerate the demo session at ``out`` (default ``sessions/demo``), replacing it atomically.
+
+    Args:
+        out: destination session directory.
+        quick: a tiny version (small frames, fast motions, few rollouts) for tests.
+
+    Returns:
+        The session directory.
+    """
+    from .scene import DemoScene, default_layouts, pick_motion, place_in_bowl_motion
+
+    started = time.perf_counter()
+    out = Path(out) if out is not None else DEMO_DIR
+    rng = np.random.default_rng(SEED)
+    size = (64, 48) if quick else (320, 240)
+    speed = 3.0 if quick else 1.25
+    gt_scene = DemoScene(*size, msaa=0 if quick else 4, shadows=not quick)
+    imagined_scene = DemoScene(*size, msaa=0, shadows=False)
+    layouts = default_layouts()
+    scripts = [("Pick the red cube", "pick", pick_motion),
+               ("Pick the red cube and place it in the bowl", "place_in_bowl", place_in_bowl_motion)]
+    episodes: list[_Episode] = []
+    for task, layout_name, motion in scripts:
+        layout = layouts[layout_name]
+        gt_scene.reset(layout)
+        waypoints = _speed_up(motion(gt_scene, layout), speed)
+        sim = gt_scene.simulate_episode(waypoints, fps=FPS, layout=layout)
+        episodes.append(_Episode(task, sim.action, sim.state, sim.frames, sim.object_poses))
+        log(f"episode {len(episodes) - 1}: {task!r}, {len(sim)} frames ({len(sim) / FPS:.1f} s)")
+
+    with SessionWriter.create(out, name="demo", units=Units("degrees"), dataset=DATASET_DIR,
+                              model={"name": "scripted demo model", "checkpoint": "planted faults"},
+                              overwrite=True) as writer:
+        from ..lerobot_writer import EpisodeData, write_lerobot_dataset
+
+        write_lerobot_dataset(writer.root / DATASET_DIR,
+                              [EpisodeData(e.task, e.state, e.action, e.frames) for e in episodes],
+                              fps=FPS, units=Units("degrees"))
+        for spec in _rollout_specs(episodes, rng, quick):
+            ep = episodes[spec.episode]
+            executed, chunks, path_time = spec.build(ep.action, rng)
+            frames = _imagine(imagined_scene, layouts, scripts[spec.episode][1], ep, executed, path_time, rng)
+            states = np.concatenate([executed[:1], chunks[:, EXECUTED - 1]]) if spec.kind == "autoregressive" else None
+            writer.add_rollout(spec.tag, kind=spec.kind, actions=chunks, states=states, prompt=spec.prompt,
+                               episode_index=spec.episode, start_frame=spec.start, fps=FPS,
+                               executed_per_chunk=EXECUTED, frames_per_chunk=EXECUTED,
+                               videos=frames, extra={"planted_fault": spec.fault})
+            log(f"rollout {spec.tag}: {spec.fault}")
+    size_mb = sum(f.stat().st_size for f in out.rglob("*") if f.is_file()) / 1e6
+    log(f"demo session {out}: {size_mb:.1f} MB in {time.perf_counter() - started:.0f} s")
+    return out
+
+
+def _speed_up(waypoints, speed: float):
+    from dataclasses import replace
+
+    return [replace(w, move_s=w.move_s / speed, hold_s=w.hold_s / speed) for w in waypoints]
+
+
+# ----------------------------------------------------------------------------------------------
+# Rollouts: a real path through a known distortion
+
+
+@dataclass
+class _Spec:
+    tag: str
+    kind: str
+    episode: int
+    prompt: str
+    fault: str
+    n_steps: int
+    start: int = 0
+    tempo: float = 1.0
+    offset: Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]] | None = None  # (T,) step -> (T, 6)
+    horizon_error: float = 0.0  # deg at the last horizon step (single chunks)
+
+    def build(self, gt: npt.NDArray[np.float64], rng: np.random.Generator):
+        """(executed (T, 6), chunks (N, H, 6), path time (T,) [GT frame]) for this rollout."""
+        if self.kind == "single_chunk":
+            steps = np.arange(HORIZON)
+            path_time = self.start + steps.astype(float)
+            chunk = _sample(gt, path_time)
+            direction = rng.normal(size=6)
+            direction /= np.linalg.norm(direction)
+            chunk = chunk + (steps / (HORIZON - 1))[:, None] ** 1.5 * self.horizon_error * direction
+            return chunk, chunk[None], path_time
+        n_chunks = -(-self.n_steps // EXECUTED)
+        steps = np.arange(n_chunks * EXECUTED + HORIZON)
+        path_time = self.start + self.tempo * steps
+        full = _sample(gt, path_time)
+        if self.offset is not None:
+            full = full + self.offset(steps)
+        full = full + rng.normal(scale=0.15, size=full.shape)  # a model is never exact
+        chunks = np.stack([full[k * EXECUTED:k * EXECUTED + HORIZON] for k in range(n_chunks)])
+        # the unexecuted tail of each chunk is a guess that wanders off a little
+        tail = np.arange(HORIZON) >= EXECUTED
+        chunks[:, tail] += rng.normal(scale=0.6, size=(n_chunks, tail.sum(), 6)).cumsum(axis=1)
+        executed = chunks[:, :EXECUTED].reshape(-1, 6)
+        return executed, chunks, path_time[: len(executed)]
+
+
+def _sample(gt: npt.NDArray[np.float64], t: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """GT joints at fractional frame times (held at the ends)."""
+    frames = np.arange(len(gt))
+    return np.stack([np.interp(t, frames, gt[:, j]) for j in range(gt.shape[1])], axis=1)
+
+
+def _rollout_specs(episodes: list[_Episode], rng: np.random.Generator, quick: bool) -> list[_Spec]:
+    j = {name: i for i, name in enumerate(JOINT_NAMES)}
+    n0, n1 = len(episodes[0].action), len(episodes[1].action)
+    steps0 = (n0 // EXECUTED) * EXECUTED
+
+    def ramp_on(joint: str, final: float, n: int):
+        return lambda s: np.outer(np.clip(s / n, 0, 1) * final, np.eye(6)[j[joint]])
+
+    def limits(s):
+        out = np.zeros((len(s), 6))
+        bump = np.exp(-0.5 * ((s - 0.5 * steps0) / (0.08 * steps0)) ** 2)
+        out[:, j["wrist_flex"]] = bump * (120.0 - 70.0)  # from ~70 deg up past the 95 deg limit
+        out[:, j["gripper"]] = -25.0 * bump  # a gripper below fully closed, as raw outputs do
+        return out
+
+    def veer(s):
+        out = np.zeros((len(s), 6))
+        # two chunks towards the other cube, then back onto the same path as the training prompt
+        out[:, j["shoulder_pan"]] = 25.0 * np.sin(np.pi * np.clip(s / (2 * EXECUTED), 0, 1))
+        return out
+
+    specs = [
+        _Spec("tempo_0.8x", "autoregressive", 0, "Pick the red cube", "same path at 0.8x speed", steps0, tempo=0.8),
+        _Spec("bias_elbow", "autoregressive", 0, "Pick the red cube", "elbow_flex bias growing to 15 deg",
+              steps0, offset=ramp_on("elbow_flex", 15.0, steps0)),
+        _Spec("limits_wrist", "autoregressive", 0, "Pick the red cube",
+              "wrist_flex to 120 deg and gripper below 0 mid-rollout", steps0, offset=limits),
+        _Spec("overrun_60chunks", "autoregressive", 1, "Pick the red cube and place it in the bowl",
+              f"60 chunks (540 steps) on a {n1}-frame episode", 60 * EXECUTED),
+        _Spec("prompt_train", "autoregressive", 0, "Pick the red cube", "training prompt", steps0),
+        _Spec("prompt_novel", "autoregressive", 0, "Pick the blue cube",
+              "novel prompt: veers for 2 chunks, then collapses onto the training path", steps0, offset=veer),
+    ]
+    starts = np.linspace(0, n1 - HORIZON - 1, 3 if quick else 6).astype(int)
+    specs += [_Spec(f"single_f{s:03d}", "single_chunk", 1, episodes[1].task,
+                    "single chunk, error growing along the horizon to 8 deg", HORIZON, start=int(s),
+                    horizon_error=8.0) for s in starts]
+    if quick:
+        specs = [s for s in specs if s.tag in ("tempo_0.8x", "limits_wrist") or s.kind == "single_chunk"]
+    return specs
+
+
+# ----------------------------------------------------------------------------------------------
+# Imagined video
+
+
+def _imagine(scene, layouts, layout_name: str, ep: _Episode, executed: npt.NDArray[np.float64],
+             path_time: npt.NDArray[np.float64], rng: np.random.Generator) -> dict[str, npt.NDArray[np.uint8]]:
+    """Render the predicted joints (objects where the real ones were at that point of the path)."""
+    from .scene import CAMERAS
+
+    scene.reset(layouts[layout_name])
+    frame_of = np.clip(np.round(path_time).astype(int), 0, len(ep.action) - 1)
+    out = {}
+    for camera in CAMERAS:
+        frames = np.stack([
+            scene.render(q, camera, {name: poses[f] for name, poses in ep.objects.items()})
+            for q, f in zip(executed, frame_of)
+        ])
+        out[camera] = degrade(frames, rng)
+    return out
+
+
+def degrade(frames: npt.NDArray[np.uint8], rng: np.random.Generator) -> npt.NDArray[np.uint8]:
+    """Make rendered frames look imagined: blur, a warm colour shift, noise, a slight wobble."""
+    f = frames.astype(np.float32)
+    # 3x3 box blur, separable
+    f = (np.roll(f, 1, axis=1) + f + np.roll(f, -1, axis=1)) / 3
+    f = (np.roll(f, 1, axis=2) + f + np.roll(f, -1, axis=2)) / 3
+    f = f * np.array([1.08, 0.97, 0.88], np.float32) + 6.0
+    f = f + rng.normal(scale=5.0, size=f.shape).astype(np.float32)
+    # geometry wobble: each frame shifted by a slowly varying sub-frame offset
+    shifts = np.round(2.0 * np.sin(np.arange(len(f)) / 7.0)).astype(int)
+    f = np.stack([np.roll(img, s, axis=1) for img, s in zip(f, shifts)])
+    return np.clip(f, 0, 255).astype(np.uint8)
