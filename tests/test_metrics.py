@@ -97,6 +97,39 @@ def test_reverse_order_is_penalised_by_dtw_not_best_match():
     assert reverse_drift.mean() > 10.0
 
 
+def _reference_dtw(pred, gt):
+    """Textbook DTW with a Python double loop: total cost, path length, per-sample mean cost."""
+    T, G = len(pred), len(gt)
+    c = np.linalg.norm(pred[:, None] - gt[None], axis=-1)
+    D = np.full((T + 1, G + 1), np.inf)
+    D[0, 0] = 0
+    for i in range(1, T + 1):
+        for j in range(1, G + 1):
+            D[i, j] = c[i - 1, j - 1] + min(D[i - 1, j - 1], D[i - 1, j], D[i, j - 1])
+    i, j, cells = T, G, []
+    while (i, j) != (0, 0):
+        cells.append((i - 1, j - 1))
+        steps = {(i - 1, j - 1): D[i - 1, j - 1], (i - 1, j): D[i - 1, j], (i, j - 1): D[i, j - 1]}
+        i, j = min(steps, key=steps.get)
+    drift = np.zeros(T)
+    count = np.zeros(T)
+    for a, b in cells:
+        drift[a] += c[a, b]
+        count[a] += 1
+    return D[T, G], len(cells), drift / count
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_dtw_matches_textbook_dynamic_programming(seed):
+    rng = np.random.default_rng(seed)
+    pred = rng.normal(size=(25, 6)).cumsum(axis=0)
+    gt = rng.normal(size=(31, 6)).cumsum(axis=0)
+    total, length, drift = _reference_dtw(pred, gt)
+    ours_drift, ours_cost = metrics.dtw(pred, gt)
+    assert ours_cost == pytest.approx(total / length, rel=1e-5)
+    np.testing.assert_allclose(ours_drift, drift, rtol=1e-5)
+
+
 def test_dtw_batched_equals_single():
     gt = _smooth_path(80)
     preds = np.stack([gt + 1.0, gt[::-1], gt * 1.1])
