@@ -208,3 +208,23 @@ def test_report_json_on_fixtures(dreamzero_dir):
                 "time_aligned_drift", "best_match_drift", "dtw_drift", "tempo", "ee_error_mm",
                 "limit_violations", "video_psnr_db", "post_episode_chunks"]:
         assert key in rows["f084"]
+
+
+def test_sweep_equals_per_rollout_timelines(tmp_path):
+    from inspector.sweep import sweep_metrics
+
+    gt = _smooth_path(400)
+    t = np.arange(360)
+    preds = [np.stack([np.interp(s * t, np.arange(400), gt[:, j]) for j in range(6)], axis=1) for s in (0.8, 1.0, 1.1)]
+    preds[1] = preds[1] + np.array([0, 0, 3.0, 0, 0, 0])
+    timelines = [_timeline(tmp_path / str(i), p, gt) for i, p in enumerate(preds)]
+    sweep = sweep_metrics(np.stack([tl.chunks for tl in timelines]), gt)
+    for i, tl in enumerate(timelines):
+        np.testing.assert_allclose(sweep.time_aligned_drift[i], tl.time_aligned_drift)
+        np.testing.assert_allclose(sweep.best_match_drift[i], tl.best_match_drift)
+        np.testing.assert_allclose(sweep.dtw_drift[i], tl.dtw_drift, rtol=1e-6)
+        np.testing.assert_allclose(sweep.ee_error_mm[i], tl.ee_error_mm, atol=1e-9)
+        np.testing.assert_allclose(sweep.chunk_rmse[i], tl.chunk_rmse)
+        assert sweep.tempo[i] == pytest.approx(tl.tempo)
+        assert sweep.rmse[i] == pytest.approx(tl.chunk_errors.rmse)
+        assert sweep.limit_violations[i].tolist() == tl.limit_violation.sum(axis=0).tolist()
