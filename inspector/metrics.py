@@ -83,17 +83,24 @@ def time_aligned(pred: npt.ArrayLike, gt: npt.ArrayLike, offset: int = 0) -> tup
 
 
 def _squared_distances(p: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
-    """(B, T, G) squared joint distances of (B, T, 6) against (G, 6), through one matmul.
+    """(B, T, G) squared joint distances of (B, T, 6) against (G, 6), as one matmul.
 
-    ``|a - b|^2 = |a|^2 + |b|^2 - 2 a.b``: BLAS does the bulk; float64 keeps the cancellation
-    error near 1e-12 of the squared magnitudes (about 1e-6 deg at distance ~0).
+    ``|a - b|^2 = |a|^2 + |b|^2 - 2 a.b`` written as ``[a, |a|^2, 1] . [-2b, 1, |b|^2]``: BLAS
+    writes the table in one pass with no broadcast temporaries. float64 keeps the cancellation
+    error near 1e-12 of the squared magnitudes.
     """
-    sq = (p * p).sum(-1, keepdim=True) + (g * g).sum(-1)[None, None] - 2.0 * torch.matmul(p, g.T)
-    return sq.clamp_(min=0.0)
+    ones_p = torch.ones(p.shape[:-1] + (1,), dtype=p.dtype)
+    ones_g = torch.ones(g.shape[:-1] + (1,), dtype=g.dtype)
+    p_aug = torch.cat([p, (p * p).sum(-1, keepdim=True), ones_p], dim=-1)
+    g_aug = torch.cat([-2.0 * g, ones_g, (g * g).sum(-1, keepdim=True)], dim=-1)
+    return torch.matmul(p_aug, g_aug.T).clamp_(min=0.0)
 
 
 def best_match(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, npt.NDArray[np.int64]]:
     """Distance to the nearest GT pose anywhere in the episode (speed-invariant).
+
+    A KD-tree over the episode's poses answers each predicted sample exactly in O(log G), so a
+    sweep of 1,000 rollouts never builds the (B, T, G) distance table.
 
     Args:
         pred: (..., T, 6).
@@ -103,24 +110,15 @@ def best_match(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, npt.NDArr
         (drift, index): (..., T) ``min_j d(pred(t), gt_j)`` and its argmin j (the GT frame the
         arm "is at").
     """
-    p = torch.as_tensor(np.ascontiguousarray(pred, np.float64))
-    g = torch.as_tensor(np.ascontiguousarray(gt, np.float64))
-    squeeze = p.ndim == 2
-    if squeeze:
-        p = p[None]
+    from scipy.spatial import cKDTree
+
+    p = np.asarray(pred, np.float64)
+    g = np.asarray(gt, np.float64)
+    drift, nearest = cKDTree(g).query(p.reshape(-1, g.shape[1]), k=1, workers=-1)
     # A GT hold (the arm at rest) repeats one pose over many frames, and every frame of it ties;
-    # the first minimum would bias the tempo fit, so each match moves to the middle of its run.
-    run_middle = torch.as_tensor(_middle_of_identical_runs(g.numpy()))
-    out_d, out_i = [], []
-    # blocks of rollouts keep the (B, T, G) distance table near 128 MB
-    for block in torch.split(p, max(1, 16_000_000 // max(1, p.shape[1] * g.shape[0])), dim=0):
-        first = _squared_distances(block, g).argmin(dim=-1)
-        # the matmul form loses ~1e-6 near zero: measure the chosen pair again, exactly
-        out_d.append(torch.linalg.vector_norm(block - g[first], dim=-1))
-        out_i.append(run_middle[first])
-    drift = torch.cat(out_d).numpy()
-    index = torch.cat(out_i).numpy()
-    return (drift[0], index[0]) if squeeze else (drift, index)
+    # an arbitrary one of them would bias the tempo fit, so each match moves to the middle of its run.
+    index = _middle_of_identical_runs(g)[nearest]
+    return drift.reshape(p.shape[:-1]), index.reshape(p.shape[:-1])
 
 
 def _middle_of_identical_runs(gt: npt.NDArray[np.float64]) -> npt.NDArray[np.int64]:
@@ -212,36 +210,47 @@ def _dtw_block(p: torch.Tensor, g: torch.Tensor) -> tuple[torch.Tensor, torch.Te
     Within a row, ``D[i, j] = min(a_j, c_ij + D[i, j-1])`` with ``a_j = c_ij + min(D[i-1, j-1],
     D[i-1, j])`` is a min-plus scan: with ``S`` the running sum of the row's costs,
     ``D[i, :] = S + cummin(a - S)``. So each row is a cumsum and a cummin, not a loop over j.
-    float32 halves the memory traffic; drifts keep ~1e-6 relative precision.
     """
     B, T, _ = p.shape
     G = g.shape[0]
-    cost = _squared_distances(p, g).sqrt_().to(torch.float32)
-    inf = torch.full((B, 1), float("inf"), dtype=cost.dtype)
-    # move into each cell: 0 diagonal, 1 from above (i-1, j), 2 from the left (i, j-1)
-    move = torch.empty((B, T, G), dtype=torch.int8)
-    prev = torch.cat([torch.zeros((B, 1), dtype=cost.dtype), inf.expand(B, G)], dim=1)  # row -1, with j = -1 column
+    # float32 costs choose the path (their ~1e-2 deg noise near zero cannot change which cells
+    # are cheapest by any margin that matters); the backtrack measures the chosen cells exactly.
+    centre = g.mean(dim=0)
+    cost = _squared_distances((p - centre).to(torch.float32), (g - centre).to(torch.float32)).sqrt_()
+    # acc[:, i + 1, j + 1] = D[i, j]; row 0 and column 0 are the boundary (inf, 0 at the origin)
+    acc = torch.empty((B, T + 1, G + 1), dtype=torch.float32)
+    acc[:, 0] = float("inf")
+    acc[:, :, 0] = float("inf")
+    acc[:, 0, 0] = 0.0
+    a = torch.empty((B, G), dtype=torch.float32)
+    running = torch.empty((B, G), dtype=torch.float32)
     for i in range(T):
-        diag, above = prev[:, :-1], prev[:, 1:]
-        a = cost[:, i] + torch.minimum(diag, above)
-        running = torch.cumsum(cost[:, i], dim=1)
-        row = running + torch.cummin(a - running, dim=1).values
-        from_left = row < a - 1e-6 * (1 + row.abs())
-        move[:, i] = torch.where(from_left, 2, (above < diag).to(torch.int8))
-        prev = torch.cat([inf, row], dim=1)
-    drift, length = _dtw_backtrack(cost.numpy(), move.numpy())
-    return torch.from_numpy(drift), prev[:, -1].to(torch.float64) / torch.from_numpy(length)
+        prev = acc[:, i]
+        torch.minimum(prev[:, :-1], prev[:, 1:], out=a)
+        a += cost[:, i]
+        torch.cumsum(cost[:, i], dim=1, out=running)
+        a -= running
+        row = acc[:, i + 1, 1:]
+        torch.cummin(a, dim=1, out=(row, torch.empty((B, G), dtype=torch.long)))
+        row += running
+    drift, total, length = _dtw_backtrack(p.numpy(), g.numpy(), acc.numpy())
+    return torch.from_numpy(drift), torch.from_numpy(total / length)
 
 
-def _dtw_backtrack(cost: npt.NDArray[np.float32], move: npt.NDArray[np.int8]
-                   ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+def _dtw_backtrack(p: npt.NDArray[np.float64], g: npt.NDArray[np.float64], acc: npt.NDArray[np.float32]
+                   ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Walk every optimal path of a block back from (T-1, G-1) to (0, 0) together.
 
+    Each step goes to the cheapest of the three predecessors in the accumulated table (the
+    diagonal first on ties, as textbook DTW does) and measures its cell exactly in float64.
+
     Returns:
-        (drift, length): (B, T) mean cost of the cells aligned to each predicted step, and (B,)
-        the number of cells on each path.
+        (drift, total, length): (B, T) mean distance of the cells aligned to each predicted
+        step, (B,) the path's total distance, and (B,) its number of cells.
     """
-    B, T, G = cost.shape
+    B, T, _ = p.shape
+    G = g.shape[0]
+    total = np.zeros(B)
     drift_sum = np.zeros((B, T))
     drift_cnt = np.zeros((B, T))
     length = np.zeros(B)
@@ -249,18 +258,22 @@ def _dtw_backtrack(cost: npt.NDArray[np.float32], move: npt.NDArray[np.int8]
     bj = np.full(B, G - 1)
     rows = np.arange(B)
     for _ in range(T + G - 1):  # every path has at most T + G - 1 cells
-        active = (bi >= 0)
+        active = bi >= 0
         if not active.any():
             break
         r, i, j = rows[active], bi[active], bj[active]
-        drift_sum[r, i] += cost[r, i, j]
+        d = np.linalg.norm(p[r, i] - g[j], axis=-1)
+        drift_sum[r, i] += d
+        total[r] += d
         drift_cnt[r, i] += 1
         length[r] += 1
-        m = move[r, i, j]
         done = (i == 0) & (j == 0)
-        bi[r] = np.where(done, -1, i - (m != 2))
-        bj[r] = np.where(done, -1, j - (m != 1))
-    return drift_sum / np.maximum(drift_cnt, 1), length
+        # predecessors of cell (i, j) sit at acc[i, j] (diagonal), acc[i, j+1] (above), acc[i+1, j] (left)
+        options = np.stack([acc[r, i, j], acc[r, i, j + 1], acc[r, i + 1, j]])
+        move = np.argmin(options, axis=0)
+        bi[r] = np.where(done, -1, i - (move != 2))
+        bj[r] = np.where(done, -1, j - (move != 1))
+    return drift_sum / np.maximum(drift_cnt, 1), total, length
 
 
 # ----------------------------------------------------------------------------------------------
