@@ -1,0 +1,296 @@
+"""Rerun ``.rrd`` export of a rollout: the same timeline the app shows, as a self-explaining file.
+
+Usage::
+
+    from inspector.export import write_recording
+    from inspector.timeline import build_timeline
+
+    write_recording(build_timeline(rollout), "ep000.rrd", views=["front"],
+                    progress=lambda fraction, message: print(f"{fraction:.0%} {message}"))
+
+A recording holds the timelines ``time`` (s), ``frame`` (imagined frame) and ``chunk``; the GT and
+predicted arms from our URDF (:mod:`inspector.export_robot`); the imagined and GT videos as
+H.264 assets with frame references (:mod:`inspector.export_video`); every metric as a named
+series with markers at chunk starts, the episode's end and limit violations
+(:mod:`inspector.export_series`); a markdown description (:mod:`inspector.export_description`);
+and one default blueprint (:func:`inspector.export_layout.build_blueprint`). Files are written to
+a temporary sibling and renamed into place, so a failed export never leaves half a file.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+import tempfile
+import time
+import uuid
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Callable, Sequence, TextIO
+
+import numpy as np
+import rerun as rr
+
+from . import export_layout as L
+from .errors import InspectorError
+from .export_description import describe
+from .export_robot import log_arms
+from .export_series import log_markers, log_metric_series, log_psnr
+from .export_video import frame_indexes, log_view
+from .session import ROLLOUT_FILE
+from .timeline import RolloutTimeline
+
+RRD_SUFFIX = ".rrd"
+
+# Share of the progress bar each stage takes (decoding for PSNR dominates a cold export).
+_VIDEO_METRICS = (0.02, 0.70)
+_VIDEO_ASSETS = (0.85, 0.99)
+
+
+def write_recording(timeline: RolloutTimeline, path: str | Path, views: Sequence[str] | None = None,
+                    progress: Callable[[float, str], None] | None = None) -> Path:
+    """Write ``timeline`` as a Rerun recording at ``path`` (atomically).
+
+    Args:
+        timeline: the rollout's computed timeline (:func:`inspector.timeline.build_timeline`).
+        path: the ``.rrd`` file to write; its directory is created if needed.
+        views: camera views to include (default: every imagined and GT view).
+        progress: ``progress(fraction, message)``, called as the export advances (0 -> 1).
+
+    Returns:
+        ``path``.
+
+    Raises:
+        InspectorError: a requested view does not exist, or a video is unreadable.
+    """
+    path = Path(path)
+    report = progress or (lambda fraction, message: None)
+    views = select_views(timeline, views)
+    report(0.0, "video metrics")
+    psnr = compute_psnr(timeline, views, report)
+    contents = L.Contents(
+        views={v: (v in timeline.rollout.views, v in timeline.gt.views) for v in views},
+        gt_joints=timeline.has_gt_joints,
+        psnr_views=[v for v, series in psnr.items() if np.isfinite(series).any()],
+    )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    # a fresh name the stream creates itself (mkstemp's 0600 would stick to the final file)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
+    rec = rr.RecordingStream(application_id=application_id(timeline.tag))
+    try:
+        rec.save(tmp, default_blueprint=L.build_blueprint(contents))
+        session = timeline.rollout.session
+        rec.send_recording_name(f"{session.name}/{timeline.tag}" if session is not None else timeline.tag)
+        _log_recording(rec, timeline, views, psnr, report)
+        rec.flush()
+        rec.disconnect()
+        os.replace(tmp, path)
+    except BaseException:
+        rec.disconnect()
+        tmp.unlink(missing_ok=True)
+        raise
+    report(1.0, "done")
+    return path
+
+
+def _log_recording(rec: rr.RecordingStream, tl: RolloutTimeline, views: list[str],
+                   psnr: dict[str, np.ndarray], report: Callable[[float, str], None]) -> None:
+    """Orchestrates the ``log_*`` functions; each takes the stream and the timeline."""
+    def steps_indexes(steps: np.ndarray) -> list[rr.TimeColumn]:
+        return L.step_indexes(tl, steps)
+
+    def frames_indexes(frames: np.ndarray) -> list[rr.TimeColumn]:
+        return frame_indexes(tl, frames)
+
+    report(_VIDEO_METRICS[1], "arms")
+    mean_psnr = {v: (float(np.nanmean(s)) if np.isfinite(s).any() else None) for v, s in psnr.items()}
+    rec.log(L.DESCRIPTION, rr.TextDocument(describe(tl, mean_psnr), media_type="text/markdown"),
+            static=True)
+    log_arms(rec, tl, steps_indexes(np.arange(tl.n_steps)))
+    report(0.80, "metric series")
+    log_metric_series(rec, tl, steps_indexes)
+    log_markers(rec, tl, steps_indexes)
+    for i, (view, series) in enumerate(psnr.items()):
+        log_psnr(rec, tl, view, series, frames_indexes, L.VIEW_RGBA[i % len(L.VIEW_RGBA)])
+    lo, hi = _VIDEO_ASSETS
+    with tempfile.TemporaryDirectory(prefix="inspector-video-") as tmp:
+        for i, view in enumerate(views):
+            start, span = lo + (hi - lo) * i / len(views), (hi - lo) / len(views)
+            report(start, f"video {view}")
+            log_view(rec, tl, view, Path(tmp),
+                     progress=lambda f, v=view, s=start: report(s + span * f, f"encoding GT video {v}"))
+
+
+def application_id(tag: str) -> str:
+    """Rerun application id of a rollout's recording: one per rollout, so each file opens with
+    its own default blueprint (the viewer keeps one active blueprint per application)."""
+    return "inspector_" + re.sub(r"[^A-Za-z0-9_-]", "_", tag)
+
+
+def select_views(tl: RolloutTimeline, views: Sequence[str] | None) -> list[str]:
+    """The views to export: ``views`` checked against the rollout's (default: all of them)."""
+    available = list(tl.rollout.views) + [v for v in tl.gt.views if v not in tl.rollout.views]
+    if views is None:
+        return available
+    missing = [v for v in views if v not in available]
+    if missing:
+        raise InspectorError(tl.rollout.root / ROLLOUT_FILE,
+                             f"no view {missing[0]!r} in rollout {tl.tag!r}; views: {available}")
+    return list(dict.fromkeys(views))
+
+
+def compute_psnr(tl: RolloutTimeline, views: Sequence[str],
+                 report: Callable[[float, str], None]) -> dict[str, np.ndarray]:
+    """(F,) PSNR [dB] per view with imagined and GT frames (the timeline's own, cached metric).
+
+    Clips decode in worker threads (the decoders release the GIL) while the PSNR of the views
+    already decoded is computed, so decoding and comparing overlap; a timeline that already holds
+    the metric (the app's) returns at once.
+    """
+    paired = [v for v in tl.video_views() if v in views]
+    lo, hi = _VIDEO_METRICS
+    out: dict[str, np.ndarray] = {}
+    with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
+        decoded = {v: [pool.submit(_decode, clip) for clip in (tl.rollout.video(v), tl.gt.clips[v])]
+                   for v in paired}
+        for i, view in enumerate(paired):
+            report(lo + (hi - lo) * i / len(paired), f"decoding {view} video")
+            for future in decoded[view]:
+                future.result()
+            report(lo + (hi - lo) * (i + 0.5) / len(paired), f"PSNR {view}")
+            out[view] = tl.video_metrics(view).psnr_db
+    return out
+
+
+def _decode(clip: object) -> None:
+    load = getattr(clip, "load", None)
+    if load is not None:
+        load()
+    else:
+        len(clip)  # type: ignore[arg-type]  # a dataset clip decodes on first access
+
+
+# ----------------------------------------------------------------------------------------------
+# Command line
+
+
+def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
+               views: Sequence[str] | None = None, dataset: str | Path | None = None) -> int:
+    """``inspector export``: write one recording per rollout; returns the exit code.
+
+    Args:
+        path: a session, a rollout directory, or a DreamZero-SO101 source directory.
+        output: a ``.rrd`` file when one rollout is exported; otherwise (or when it is an
+            existing directory) a directory that receives ``<tag>.rrd`` per rollout.
+        rollout: export only the rollout with this tag.
+        views: camera views to include (default: all).
+        dataset: LeRobot dataset with the GT episodes.
+
+    Bad input prints ``error: <file>: <what>`` to stderr and returns 2; the other rollouts of a
+    session are still exported when one of them is broken.
+    """
+    from .sources import open_sources
+    from .timeline import build_timeline
+
+    errors = 0
+    try:
+        sources = open_sources([path], dataset=dataset)
+        try:
+            targets = _plan_outputs(sources, Path(path), Path(output), rollout, views)
+            for session, tag, dest in targets:
+                if tag in session.errors:
+                    _print_error(session.errors[tag])
+                    errors += 1
+                    continue
+                bar = TextProgress(tag)
+                try:
+                    tl = build_timeline(session.rollouts[tag])
+                    rollout_views = None if views is None else [
+                        v for v in views if v in tl.rollout.views or v in tl.gt.views]
+                    write_recording(tl, dest, views=rollout_views, progress=bar)
+                except InspectorError as exc:
+                    bar.close()
+                    _print_error(exc)
+                    errors += 1
+                    continue
+                bar.close()
+                print(f"wrote {dest} ({format_size(dest.stat().st_size)})")
+        finally:
+            sources.close()
+    except InspectorError as exc:
+        _print_error(exc)
+        return 2
+    return 2 if errors else 0
+
+
+def _plan_outputs(sources, path: Path, output: Path, tag: str | None, views: Sequence[str] | None):
+    """[(session, tag, destination)] for the rollouts asked for."""
+    available = [(s, t) for s in sources.sessions for t in s.tags()]
+    if tag is not None:
+        chosen = [(s, t) for s, t in available if t == tag]
+        if not chosen:
+            raise InspectorError(path, f"no rollout {tag!r}; rollouts: {[t for _, t in available]}")
+    else:
+        chosen = available
+    if not chosen:
+        raise InspectorError(path, "no rollouts to export")
+    if views:
+        known = {v for s, t in chosen if t in s.rollouts
+                 for v in (*s.rollouts[t].views, *s.rollouts[t].gt_views)}
+        missing = [v for v in views if v not in known]
+        if missing:
+            raise InspectorError(path, f"no view {missing[0]!r} in any rollout; views: {sorted(known)}")
+    if output.suffix == RRD_SUFFIX and not output.is_dir():
+        if len(chosen) > 1:
+            raise InspectorError(output, f"one file for {len(chosen)} rollouts; give a directory "
+                                         "or pick one with --rollout")
+        return [(chosen[0][0], chosen[0][1], output)]
+    if output.exists() and not output.is_dir():
+        raise InspectorError(output, "exists and is not a directory")
+    return [(s, t, output / f"{t}{RRD_SUFFIX}") for s, t in chosen]
+
+
+def _print_error(exc: InspectorError) -> None:
+    print(f"error: {exc}", file=sys.stderr)
+
+
+def format_size(n_bytes: int) -> str:
+    """``2_900_000`` -> ``"2.9 MB"`` (decimal units)."""
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n_bytes >= scale:
+            return f"{n_bytes / scale:.1f} {unit}"
+    return f"{n_bytes} B"
+
+
+class TextProgress:
+    """A one-line text progress bar on a terminal (nothing when the stream is not a TTY).
+
+    It appears only once an export has run for ``delay_s``, so quick exports stay quiet.
+    """
+
+    def __init__(self, label: str, stream: TextIO | None = None, width: int = 30, delay_s: float = 0.5):
+        self.label, self.width, self.delay_s = label, width, delay_s
+        self.stream = stream if stream is not None else sys.stderr
+        self._start = time.monotonic()
+        self._shown = False
+        self._enabled = bool(getattr(self.stream, "isatty", lambda: False)())
+
+    def __call__(self, fraction: float, message: str = "") -> None:
+        if not self._enabled or time.monotonic() - self._start < self.delay_s:
+            return
+        self.stream.write("\r" + self.line(fraction, message))
+        self.stream.flush()
+        self._shown = True
+
+    def line(self, fraction: float, message: str = "") -> str:
+        fraction = min(max(fraction, 0.0), 1.0)
+        filled = int(round(fraction * self.width))
+        return (f"{self.label} [{'#' * filled}{'.' * (self.width - filled)}] "
+                f"{fraction:4.0%} {message}")[:100].ljust(100)
+
+    def close(self) -> None:
+        if self._shown:
+            self.stream.write("\r" + " " * 100 + "\r")
+            self.stream.flush()
+            self._shown = False

