@@ -25,7 +25,6 @@ import sys
 import tempfile
 import time
 import uuid
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Callable, Sequence, TextIO
 
@@ -144,31 +143,11 @@ def compute_psnr(tl: RolloutTimeline, views: Sequence[str],
                  report: Callable[[float, str], None]) -> dict[str, np.ndarray]:
     """(F,) PSNR [dB] per view with imagined and GT frames (the timeline's own, cached metric).
 
-    Clips decode in worker threads (the decoders release the GIL) while the PSNR of the views
-    already decoded is computed, so decoding and comparing overlap; a timeline that already holds
-    the metric (the app's) returns at once.
+    A timeline that already holds the metric (the app's) returns at once.
     """
-    paired = [v for v in tl.video_views() if v in views]
     lo, hi = _VIDEO_METRICS
-    out: dict[str, np.ndarray] = {}
-    with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
-        decoded = {v: [pool.submit(_decode, clip) for clip in (tl.rollout.video(v), tl.gt.clips[v])]
-                   for v in paired}
-        for i, view in enumerate(paired):
-            report(lo + (hi - lo) * i / len(paired), f"decoding {view} video")
-            for future in decoded[view]:
-                future.result()
-            report(lo + (hi - lo) * (i + 0.5) / len(paired), f"PSNR {view}")
-            out[view] = tl.video_metrics(view).psnr_db
-    return out
-
-
-def _decode(clip: object) -> None:
-    load = getattr(clip, "load", None)
-    if load is not None:
-        load()
-    else:
-        len(clip)  # type: ignore[arg-type]  # a dataset clip decodes on first access
+    metrics_by_view = tl.all_video_metrics(list(views), lambda f, msg: report(lo + (hi - lo) * f, msg))
+    return {view: vm.psnr_db for view, vm in metrics_by_view.items()}
 
 
 # ----------------------------------------------------------------------------------------------

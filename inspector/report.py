@@ -37,11 +37,8 @@ def rollout_summary(tl: RolloutTimeline) -> dict[str, Any]:
         inside = tl.ee_error_mm[~tl.post_episode] if tl.post_episode is not None else tl.ee_error_mm
         inside = inside if inside.size else tl.ee_error_mm
         ee = {"mean": float(inside.mean()), "final": float(inside[-1])}
-    psnr = {}
-    for view in tl.video_views():
-        value = tl.video_metrics(view).mean_psnr_db
-        if value is not None:
-            psnr[view] = value
+    psnr = {view: vm.mean_psnr_db for view, vm in tl.all_video_metrics().items()
+            if vm.mean_psnr_db is not None}
     by_joint = tl.limit_violation.sum(axis=0)
     return {
         "tag": r.tag,
@@ -67,11 +64,17 @@ def rollout_summary(tl: RolloutTimeline) -> dict[str, Any]:
 
 
 def build_report(paths: Sequence[str], dataset: str | None = None) -> dict[str, Any]:
-    """Metrics for every rollout under ``paths``; broken rollouts are listed under ``errors``."""
+    """Metrics for every rollout under ``paths``; broken rollouts are listed under ``errors``.
+
+    Raises:
+        InspectorError: a path is unusable, or no rollout under ``paths`` could be reported (none
+            at all, or every one broken: the first one's error, counting the others).
+    """
     sources = open_sources(paths, dataset=dataset)
     try:
         rows: list[dict[str, Any]] = []
         timelines: list[RolloutTimeline] = []
+        failed = [err for s in sources.sessions for _, err in sorted(s.errors.items())]
         errors = {f"{s.name}/{tag}": str(err) for s in sources.sessions for tag, err in s.errors.items()}
         from .errors import InspectorError
 
@@ -82,6 +85,13 @@ def build_report(paths: Sequence[str], dataset: str | None = None) -> dict[str, 
                 timelines.append(tl)
             except InspectorError as exc:
                 errors[f"{session.name}/{rollout.tag}"] = str(exc)
+                failed.append(exc)
+        if not rows:
+            if not failed:
+                where = ", ".join(str(s.root) for s in sources.sessions) or ", ".join(map(str, paths))
+                raise InspectorError(where, "no rollouts to report")
+            more = f" ({len(failed) - 1} more broken rollout(s))" if len(failed) > 1 else ""
+            raise InspectorError(failed[0].file, failed[0].what + more)
         report: dict[str, Any] = {"rollouts": rows, "aggregate": _aggregate(rows)}
         divergences = _prompt_pairs(timelines)
         if divergences:

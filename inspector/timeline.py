@@ -7,9 +7,11 @@ single-chunk rollout the steps are the whole predicted horizon.
 
 from __future__ import annotations
 
+import os
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import numpy.typing as npt
@@ -159,13 +161,44 @@ class RolloutTimeline:
     def gt_frames_resized(self, view: str) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.uint8]]:
         """(frames with GT, their GT frames resized to the imagined size) for ``view``."""
         imagined = self.rollout.video(view).frames
+        h, w = imagined.shape[1:3]
+        if view in self.rollout.gt_views:
+            # carried GT: frame i pairs with imagined frame i, already decoded at the imagined size
+            gt = self.rollout.video(view, gt=True).frames[: len(imagined)]
+            return np.arange(len(gt)), metrics.resize_frames(gt, h, w)
         steps = self.frame_step(len(imagined))
         pairs = [(f, self.gt.frame(view, f, int(steps[f]))) for f in range(len(imagined))]
         have = np.array([f for f, g in pairs if g is not None], dtype=np.int64)
         if have.size == 0:
             return have, np.zeros((0, *imagined.shape[1:]), np.uint8)
-        h, w = imagined.shape[1:3]
         return have, metrics.resize_frames(np.stack([pairs[f][1] for f in have]), h, w)
+
+    def all_video_metrics(self, views: list[str] | None = None,
+                          progress: Callable[[float, str], None] | None = None) -> dict[str, VideoMetrics]:
+        """PSNR of every paired view, decoding clips in worker threads while comparing the ready ones.
+
+        PyAV decodes outside the GIL, so on two cores one clip decodes while another is compared.
+
+        Args:
+            views: views to compute (default: every view with imagined and GT frames).
+            progress: optional ``progress(fraction, message)``.
+        """
+        from concurrent.futures import ThreadPoolExecutor
+
+        paired = [v for v in (self.video_views() if views is None else views) if v in self.video_views()]
+        out: dict[str, VideoMetrics] = {}
+        with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
+            decoding = {v: [pool.submit(len, self.rollout.video(v)), pool.submit(len, self.gt.clips[v])]
+                        for v in paired}
+            for i, view in enumerate(paired):
+                if progress is not None:
+                    progress(i / max(1, len(paired)), f"decoding {view} video")
+                for future in decoding[view]:
+                    future.result()
+                if progress is not None:
+                    progress((i + 0.5) / max(1, len(paired)), f"PSNR {view}")
+                out[view] = self.video_metrics(view)
+        return out
 
     def _compute_video_metrics(self, view: str, with_ssim: bool) -> VideoMetrics:
         imagined = self.rollout.video(view).frames

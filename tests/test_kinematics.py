@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from inspector.kinematics import So101Kinematics, kinematics
-from inspector.robot import GRIPPER_FRAME, load_urdf, resolved_urdf_text, urdf_path
+from inspector.robot import load_urdf, resolved_urdf_text, urdf_path
 from inspector.units import (JOINT_LIMITS_RAD, JOINT_NAMES, Units, from_radians, guess_arm_units,
                              joint_order, limits_in_units, to_radians)
 

@@ -1,0 +1,89 @@
+"""Helpers for driving the app in Debian Chromium through Playwright (never a downloaded browser)."""
+
+from __future__ import annotations
+
+import shutil
+import time
+from pathlib import Path
+from typing import Callable
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+]
+SCENE_TIMEOUT_S = 20.0
+# The first page of a browser compiles its WebGL shaders in software: allow for it.
+PAGE_TIMEOUT_S = 60.0
+
+
+def skip_reason() -> str | None:
+    """Why the browser tests cannot run here, or None."""
+    if not CHROMIUM.is_file() and shutil.which("chromium") is None:
+        return "Debian chromium not installed (apt-get install -y chromium)"
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        return "the playwright Python package is not installed"
+    return None
+
+
+def launch(playwright):
+    """Launch the system Chromium headless."""
+    exe = str(CHROMIUM) if CHROMIUM.is_file() else shutil.which("chromium")
+    return playwright.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS, headless=True)
+
+
+def wait_until(condition: Callable[[], object], timeout: float = SCENE_TIMEOUT_S, interval: float = 0.1,
+               what: str = "condition") -> object:
+    """Poll ``condition`` until it is truthy; raise AssertionError after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = condition()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(interval)
+
+
+def open_app(page, url: str) -> None:
+    """Load the app and wait until its controls and first video frames are there."""
+    page.goto(url)
+    page.wait_for_selector("text=SO-101 rollout inspector", timeout=PAGE_TIMEOUT_S * 1000)
+    page.wait_for_selector("canvas", timeout=PAGE_TIMEOUT_S * 1000)
+
+
+def hide_software_webgl_notice(page) -> None:
+    """viser warns that headless Chromium renders WebGL in software; hide it for screenshots."""
+    page.add_style_tag(content="#webgl-software-rendering{display:none !important}")
+
+
+def slider_thumb(page, label):
+    """The thumb of the viser slider labelled ``label`` (text or regex; found via its <label for=...>)."""
+    target = page.locator("label", has_text=label).first.get_attribute("for")
+    return page.locator(f"[id='{target}'] [role=slider]").first
+
+
+def frame_sources(page) -> dict[str, str]:
+    """``{"<view>/<kind>": src}`` of the frames the video panel shows now."""
+    return page.evaluate(
+        "() => Object.fromEntries([...document.querySelectorAll('img.inspector-frame')]"
+        ".map(e => [e.dataset.view + '/' + e.dataset.kind, e.getAttribute('src')]))")
+
+
+def select_option(page, label: str, option: str) -> None:
+    """Pick ``option`` in the viser dropdown labelled ``label``."""
+    page.get_by_label(label, exact=True).click()
+    page.get_by_role("option", name=option, exact=True).click()
+
+
+def canvas_is_drawn(png: bytes, box: tuple[int, int, int, int]) -> bool:
+    """True when the screenshot region ``box`` (x0, y0, x1, y1) is not a flat colour."""
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))[box[1]:box[3], box[0]:box[2]]
+    return bool(img.reshape(-1, 3).std(axis=0).max() > 8.0)

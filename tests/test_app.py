@@ -1,0 +1,324 @@
+"""The web app without a browser: tabs driven through TabState and a headless websocket client."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from inspector.app import HeadlessClient, TabState, serve
+from inspector.app._annotations import read_annotations, update_annotation
+from inspector.app._frames import READY
+from inspector.errors import InspectorError
+
+
+def make_sessions(fixtures_dir: Path, root: Path) -> tuple[Path, Path]:
+    """Import the DreamZero fixtures into a session, and a copy with faults planted.
+
+    The copy's ``f000`` has a truncated ``actions.npy`` (the rollout fails to load) and its
+    ``ep000_novel`` a truncated GT front video (that view fails, the rest of the rollout works).
+    """
+    from inspector.importers.dreamzero_so101 import import_dreamzero
+
+    good = import_dreamzero(fixtures_dir / "dreamzero_so101", root / "fixture", log=lambda _: None)
+    broken = root / "broken"
+    shutil.copytree(good, broken)
+    actions = broken / "rollouts" / "f000" / "actions.npy"
+    actions.write_bytes(actions.read_bytes()[:200])
+    video = broken / "rollouts" / "ep000_novel" / "gt" / "video" / "front.mp4"
+    video.write_bytes(video.read_bytes()[:3000])
+    return good, broken
+
+
+@pytest.fixture(scope="module")
+def sessions(fixtures_dir, tmp_path_factory) -> tuple[Path, Path]:
+    return make_sessions(fixtures_dir, tmp_path_factory.mktemp("app"))
+
+
+@pytest.fixture(scope="module")
+def app(sessions):
+    app = serve([sessions[1]], port=0, block=False)
+    yield app
+    app.stop()
+
+
+def connect(app, n_before: int | None = None) -> tuple[HeadlessClient, TabState]:
+    """A new headless client and the tab the app built for it."""
+    before = set(app.tabs)
+    client = HeadlessClient(app.port)
+    deadline = time.monotonic() + 60
+    while True:
+        new = [t for cid, t in list(app.tabs.items()) if cid not in before]
+        if new:
+            tab = new[0]
+            with tab.lock:  # the first rollout opens right after the tab registers
+                pass
+            return client, tab
+        assert time.monotonic() < deadline, "no tab for the headless client"
+        time.sleep(0.05)
+
+
+def key(app, tag: str) -> str:
+    return next(k for k, e in app.catalog.entries.items() if e.tag == tag)
+
+
+def test_tab_opens_and_scrubs(app):
+    client, tab = connect(app)
+    with client:
+        assert tab.open(key(app, "ep000_train"))
+        tl = tab.loaded.timeline
+        assert tl.n_steps == 540 and tab.step == 0
+        assert tab.set_step(100) == 100
+        assert (tab.chunk, tab.step_in_chunk) == (100 // 9, 100 % 9)
+        assert tab.controls.chunk.value == 11 and tab.controls.step_in_chunk.value == 1
+        assert tab.set_step(10_000) == 539  # clamped
+        assert tab.set_chunk(3) == 3 * 9 + 8  # keeps the step within the chunk
+        # The frames arrive in the background, then every view shows a pair.
+        assert tab.loaded.frames.done.wait(60)
+        tab.set_step(20, force=True)
+        assert {p.view for p in tab.pairs} == {"front", "gripper", "top"}
+        assert all(p.status == READY and p.imagined and p.gt for p in tab.pairs)
+        assert all(p.imagined_index == tl.frame_index(20) for p in tab.pairs)
+        before = [p.imagined for p in tab.pairs]
+        tab.set_step(200)
+        assert [p.imagined for p in tab.pairs] != before
+        # Past the real episode's end (328 steps) there is no GT frame, and it says so.
+        tab.set_step(400)
+        assert all(p.gt is None and "end" in p.gt_note for p in tab.pairs)
+        assert tab.loaded.timeline.episode_end_step == 328
+
+
+def test_worst_chunk_and_limits(app):
+    client, tab = connect(app)
+    with client:
+        assert tab.open(key(app, "ep000_train"))
+        tl = tab.loaded.timeline
+        assert tab.jump_to_worst_chunk() == tl.worst_chunk() * tl.steps_per_chunk
+        bad = int(np.flatnonzero(tl.limit_violation.any(axis=1))[0])
+        tab.set_step(bad)
+        texts = tab._limit_text(bad)
+        assert any(texts) and all(("limit" in t) == v for t, v in zip(texts, tl.limit_violation[bad]))
+
+
+def test_tabs_are_independent(app):
+    c1, t1 = connect(app)
+    c2, t2 = connect(app)
+    with c1, c2:
+        assert t1 is not t2 and t1.client_id != t2.client_id
+        assert t1.open(key(app, "ep000_train")) and t2.open(key(app, "ep000_train"))
+        t1.set_step(250)
+        assert t2.step == 0 and t2.controls.chunk.value == 0
+        assert t1.loaded.timeline is t2.loaded.timeline  # shared, built once
+        t2.open(key(app, "f084"))
+        assert t1.key == key(app, "ep000_train") and t1.step == 250
+
+
+def test_slider_move_from_client_moves_only_that_tab(app):
+    c1, t1 = connect(app)
+    c2, t2 = connect(app)
+    with c1, c2:
+        t1.open(key(app, "ep000_train"))
+        t2.open(key(app, "ep000_train"))
+        # What a browser sends when the user drags the chunk slider (uuid: viser's internal id).
+        c1.set_gui_value(t1.controls.chunk._impl.uuid, 7)
+        deadline = time.monotonic() + 10
+        while t1.chunk != 7 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert t1.chunk == 7 and t1.step == 63
+        assert t2.step == 0
+
+
+def test_broken_rollout_shows_error_card_and_others_work(app):
+    client, tab = connect(app)
+    with client:
+        assert not tab.open(key(app, "f000"))
+        assert isinstance(tab.error, InspectorError)
+        assert tab.controls.error.visible and "actions.npy" in tab.controls.error.content
+        assert tab.loaded is None
+        tab.set_step(5)  # harmless without a rollout
+        assert tab.open(key(app, "f084"))
+        assert not tab.controls.error.visible and tab.error is None
+
+
+def test_broken_video_fails_alone(app):
+    client, tab = connect(app)
+    with client:
+        assert tab.open(key(app, "ep000_novel"))
+        frames = tab.loaded.frames
+        assert frames.done.wait(60)
+        assert frames.status["front"] == READY and frames.status["top"] == READY
+        assert frames.gt_status["front"] != READY and "front.mp4" in frames.gt_status["front"]
+        tab.set_step(3, force=True)
+        by_view = {p.view: p for p in tab.pairs}
+        assert by_view["front"].imagined and by_view["front"].gt is None
+        assert by_view["top"].imagined and by_view["top"].gt
+        assert "front.mp4" in tab.video.html.content
+
+
+def test_timeline_failure_shows_error_card(app, monkeypatch):
+    import inspector.app._catalog as catalog_module
+
+    def explode(rollout):
+        raise RuntimeError("metrics blew up")
+
+    monkeypatch.setattr(catalog_module, "build_timeline", explode)
+    client, tab = connect(app)
+    with client:
+        assert not tab.open(key(app, "f169"))
+        assert "metrics blew up" in tab.controls.error.content
+        assert "f169" in tab.controls.error.content
+        monkeypatch.undo()
+        assert tab.open(key(app, "f169"))  # a failure is not cached
+
+
+def test_names_from_the_browser_are_never_paths(app):
+    client, tab = connect(app)
+    with client:
+        opened = tab.key
+        assert not tab.open("../../../etc/passwd")
+        assert not tab.open("/etc")
+        assert tab.key == opened
+
+
+def test_compare_mode(app):
+    client, tab = connect(app)
+    with client:
+        tab.open(key(app, "ep000_train"))
+        n_plots = len(tab.plots.plots)
+        assert tab.set_compare(key(app, "ep000_novel"))
+        assert tab.compare is not None and tab.scene.cmp_arm is not None and tab.scene.cmp_arm.visible
+        assert len(tab.plots.plots) == n_plots + 1  # the divergence plot
+        assert "ep000_novel" in tab.controls.compare_info.content
+        tab.set_step(300)
+        assert tab.set_compare(None) and not tab.scene.cmp_arm.visible
+
+
+def test_playback_advances_and_stops(app):
+    client, tab = connect(app)
+    tab.open(key(app, "ep000_train"))
+    tab.speed = 4.0
+    tab.play()
+    time.sleep(0.6)
+    tab.pause()
+    reached = tab.step
+    assert reached > 10
+    time.sleep(0.3)
+    assert tab.step == reached
+    tab.play()
+    client.close()  # the tab goes away: its playback thread must stop
+    assert tab.closed.wait(10)
+    time.sleep(0.3)
+    frozen = tab.step
+    time.sleep(0.3)
+    assert tab.step == frozen and not tab.playing
+
+
+def test_notes_from_two_tabs_both_survive(app, sessions):
+    c1, t1 = connect(app)
+    c2, t2 = connect(app)
+    with c1, c2:
+        k = key(app, "ep000_train")
+        t1.open(k)
+        t2.open(k)
+        t1.set_chunk(4)
+        t2.set_chunk(9)
+        results = []
+        threads = [threading.Thread(target=lambda t=t, n=n: results.append(
+            t.save_notes(rollout_flag=True, chunk_flag=True, chunk_note=n))) for t, n in ((t1, "tab one"), (t2, "tab two"))]
+        for th in threads:
+            th.start()
+        for th in threads:
+            th.join()
+        assert results == [True, True]
+        data = json.loads((sessions[1] / "annotations.json").read_text())
+        chunks = data["rollouts"]["ep000_train"]["chunks"]
+        assert chunks["4"] == {"flag": True, "note": "tab one"}
+        assert chunks["9"] == {"flag": True, "note": "tab two"}
+
+
+def test_annotations_concurrent_writers(tmp_path):
+    def writer(offset: int) -> None:
+        for i in range(25):
+            update_annotation(tmp_path, "r", chunk=offset + i, flag=True, note=f"n{offset + i}")
+
+    threads = [threading.Thread(target=writer, args=(k * 100,)) for k in range(4)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    chunks = read_annotations(tmp_path)["rollouts"]["r"]["chunks"]
+    assert len(chunks) == 100 and chunks["305"]["note"] == "n305"
+    update_annotation(tmp_path, "r", chunk=305, flag=False, note="")
+    assert "305" not in read_annotations(tmp_path)["rollouts"]["r"]["chunks"]
+
+
+def test_annotations_never_overwrite_a_damaged_file(tmp_path):
+    (tmp_path / "annotations.json").write_text("{ not json")
+    with pytest.raises(InspectorError, match="annotations.json"):
+        update_annotation(tmp_path, "r", flag=True)
+    assert (tmp_path / "annotations.json").read_text() == "{ not json"
+
+
+def test_cursor_plot_markers(app):
+    from inspector.app._plots import CursorPlot, Line
+
+    x = np.arange(20) / 10.0
+    plot = CursorPlot(app.server.gui, "t", x, [Line("a", np.sin(x), "#000")], ticks=[0.0, 0.9], end=1.5)
+    plot.set_cursor(0.55)
+    data = plot.handle.data
+    assert len({len(d) for d in data}) == 1
+    assert np.all(np.diff(data[0]) >= 0)
+    cursor = data[-1]
+    assert np.isfinite(cursor).sum() == 2 and np.all(data[0][np.isfinite(cursor)] == 0.55)
+    assert np.isfinite(data[-2]).sum() == 2  # episode end line
+    assert np.isfinite(data[-3]).sum() == 6  # two chunk ticks, three samples each
+    assert np.isfinite(data[1]).all()  # the data line runs unbroken through every marker
+    plot.handle.remove()
+
+
+def test_serve_without_demo_says_how_to_build_it(monkeypatch, tmp_path):
+    import inspector.app._server as server_module
+
+    monkeypatch.setattr(server_module, "BUNDLED_DEMO", tmp_path / "missing")
+    with pytest.raises(InspectorError, match="inspector demo --rebuild"):
+        serve([], port=0, block=False)
+
+
+def test_cli_serve_subprocess(sessions):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, "-m", "inspector", "serve", str(sessions[0]), "--port", str(port)],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    try:
+        deadline = time.monotonic() + 60
+        lines = []
+        while time.monotonic() < deadline:
+            line = proc.stdout.readline()
+            lines.append(line)
+            if "inspector: serving" in line or proc.poll() is not None:
+                break
+        assert "inspector: serving 6 rollout(s)" in "".join(lines), "".join(lines)
+        assert f"127.0.0.1:{port}" in "".join(lines)  # loopback unless --host
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10) as r:
+            assert r.status == 200 and b"<html" in r.read().lower()
+        with HeadlessClient(port):
+            time.sleep(1.0)  # a tab builds in the subprocess without errors
+        assert proc.poll() is None
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()

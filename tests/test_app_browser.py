@@ -1,0 +1,169 @@
+"""The web app in a real browser: Debian Chromium driven by Playwright.
+
+One app serves a session imported from the shared DreamZero fixtures, with one rollout broken on
+purpose (``f000``: truncated actions.npy). Set ``INSPECTOR_DOCS_SCREENSHOT=1`` to also refresh
+``docs/screenshot.png`` (from the bundled demo when it is built, else from the fixture session).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+import pytest
+from browser import (canvas_is_drawn, frame_sources, hide_software_webgl_notice, launch, open_app,
+                     select_option, skip_reason, slider_thumb, wait_until)
+from test_app import make_sessions
+
+from inspector.app import serve
+
+_reason = skip_reason()
+pytestmark = [pytest.mark.browser, pytest.mark.slow] + ([pytest.mark.skip(reason=_reason)] if _reason else [])
+
+DOCS_SCREENSHOT = Path(__file__).resolve().parents[1] / "docs" / "screenshot.png"
+SCENE_BOX = (420, 120, 960, 900)  # part of a 1600x1000 page where the 3D canvas shows
+
+
+@pytest.fixture(scope="module")
+def app(fixtures_dir, tmp_path_factory):
+    _, broken = make_sessions(fixtures_dir, tmp_path_factory.mktemp("browser"))
+    app = serve([broken], port=0, block=False)
+    yield app
+    app.stop()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = launch(p)
+        yield b
+        b.close()
+
+
+def new_page(browser, app, width: int = 1600, height: int = 1000):
+    """A fresh page on the app and the server-side TabState it got."""
+    before = set(app.tabs)
+    page = browser.new_page(viewport={"width": width, "height": height})
+    open_app(page, app.url)
+    tab = wait_until(lambda: next((t for cid, t in list(app.tabs.items()) if cid not in before), None),
+                     what="the page's tab on the server")
+    wait_until(lambda: tab.loaded is not None or tab.error is not None, what="the first rollout")
+    return page, tab
+
+
+def key(app, tag: str) -> str:
+    return next(k for k, e in app.catalog.entries.items() if e.tag == tag)
+
+
+def open_in_page(page, tab, app, tag: str) -> None:
+    """Pick a rollout in the page's picker and wait for its frames."""
+    k = key(app, tag)
+    select_option(page, "Rollout", k)
+    wait_until(lambda: tab.key == k and tab.loaded is not None, what=f"{tag} to open")
+    n_views = len(tab.loaded.frames.views)
+    wait_until(lambda: len(frame_sources(page)) == 2 * n_views, timeout=60, what="all video frames")
+
+
+def test_page_loads_and_scene_renders(browser, app):
+    page, tab = new_page(browser, app)
+    open_in_page(page, tab, app, "ep000_train")
+    assert set(frame_sources(page)) == {f"{v}/{k}" for v in ("front", "gripper", "top") for k in ("imagined", "gt")}
+    page.wait_for_timeout(1500)  # let the software renderer draw the arm
+    assert canvas_is_drawn(page.screenshot(), SCENE_BOX), "the 3D canvas is blank"
+    assert page.get_by_text("Pick the red cube").first.is_visible()
+    assert page.get_by_text("arm degrees, gripper 0..100").first.is_visible()  # unit mode always shown
+    page.close()
+
+
+def test_chunk_slider_moves_server_state_and_video(browser, app):
+    page, tab = new_page(browser, app)
+    open_in_page(page, tab, app, "ep000_train")
+    before = frame_sources(page)
+    thumb = slider_thumb(page, re.compile(r"^Chunk$"))
+    thumb.focus()
+    for _ in range(3):
+        page.keyboard.press("ArrowRight")
+    wait_until(lambda: tab.chunk == 3, what="the tab to reach chunk 3")
+    assert tab.step == 27
+    wait_until(lambda: frame_sources(page)["front/imagined"] != before["front/imagined"],
+               what="the imagined frame to change")
+    # Dragging with the mouse works too.
+    box = thumb.bounding_box()
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.mouse.down()
+    page.mouse.move(box["x"] + 120, box["y"] + box["height"] / 2, steps=8)
+    page.mouse.up()
+    wait_until(lambda: tab.chunk > 10, what="the drag to move the chunk")
+    page.close()
+
+
+def test_two_pages_hold_independent_timelines(browser, app):
+    p1, t1 = new_page(browser, app)
+    p2, t2 = new_page(browser, app)
+    open_in_page(p1, t1, app, "ep000_train")
+    open_in_page(p2, t2, app, "ep000_train")
+    frames2 = frame_sources(p2)
+    slider_thumb(p1, re.compile(r"^Chunk$")).focus()
+    p1.keyboard.press("End")
+    wait_until(lambda: t1.chunk == t1.loaded.timeline.n_chunks - 1, what="page 1 at the last chunk")
+    p2.wait_for_timeout(1000)
+    assert t2.step == 0 and frame_sources(p2) == frames2
+    assert slider_thumb(p2, re.compile(r"^Chunk$")).get_attribute("aria-valuenow") == "0"
+    p1.close()
+    p2.close()
+
+
+def test_broken_rollout_shows_error_card_and_others_still_load(browser, app):
+    page, tab = new_page(browser, app)
+    select_option(page, "Rollout", key(app, "f000") + " ⚠")
+    card = page.locator(".inspector-error-card")
+    card.wait_for(state="visible", timeout=20_000)
+    assert "actions.npy" in card.inner_text()
+    assert tab.loaded is None and tab.error is not None
+    open_in_page(page, tab, app, "f084")
+    assert page.locator(".inspector-error-card").count() == 0 or not card.is_visible()
+    page.close()
+
+
+def test_screenshot(browser, app, tmp_path):
+    """A screenshot of the app; refreshes docs/screenshot.png when INSPECTOR_DOCS_SCREENSHOT=1."""
+    from inspector.session import is_session
+    from inspector.sources import BUNDLED_DEMO
+
+    shot_app = app
+    if os.environ.get("INSPECTOR_DOCS_SCREENSHOT") and is_session(BUNDLED_DEMO):
+        shot_app = serve([BUNDLED_DEMO], port=0, block=False)
+    try:
+        page, tab = new_page(browser, shot_app)
+        hide_software_webgl_notice(page)
+        # The richest view: an autoregressive rollout with GT joints if there is one.
+        tag = _pick_rollout(shot_app)
+        open_in_page(page, tab, shot_app, tag)
+        tl = tab.loaded.timeline
+        tab.set_chunk(min(tl.worst_chunk(), tl.n_chunks - 1) if tl.kind == "autoregressive" else 0, 4)
+        wait_until(lambda: tab.loaded.frames.done.is_set(), timeout=60, what="PSNR")
+        page.wait_for_timeout(2500)
+        out = tmp_path / "screenshot.png"
+        page.screenshot(path=str(out))
+        assert canvas_is_drawn(out.read_bytes(), SCENE_BOX)
+        if os.environ.get("INSPECTOR_DOCS_SCREENSHOT"):
+            DOCS_SCREENSHOT.parent.mkdir(exist_ok=True)
+            DOCS_SCREENSHOT.write_bytes(out.read_bytes())
+        page.close()
+    finally:
+        if shot_app is not app:
+            shot_app.stop()
+
+
+def _pick_rollout(app) -> str:
+    entries = [e for e in app.catalog.entries.values() if e.error is None]
+    for want_ar, want_gt in ((True, True), (False, True), (True, False)):
+        for e in entries:
+            r = e.rollout
+            has_gt = r.gt_actions is not None or e.session.dataset_root is not None
+            if (r.kind == "autoregressive") == want_ar and has_gt == want_gt:
+                return e.tag
+    return entries[0].tag

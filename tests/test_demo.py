@@ -1,0 +1,124 @@
+"""The bundled demo session: the metrics find every planted fault; the generator reruns."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from inspector.demo.generate import DEMO_DIR
+from inspector.metrics import prompt_divergence
+from inspector.session import open_session
+from inspector.timeline import build_timeline
+from inspector.units import JOINT_NAMES
+
+ELBOW, WRIST_FLEX, GRIPPER = (JOINT_NAMES.index(j) for j in ("elbow_flex", "wrist_flex", "gripper"))
+
+
+@pytest.fixture(scope="module")
+def demo():
+    if not (DEMO_DIR / "session.json").is_file():
+        pytest.skip("sessions/demo not built (inspector demo --rebuild)")
+    session = open_session(DEMO_DIR)
+    assert not session.errors
+    return {tag: build_timeline(r) for tag, r in session.rollouts.items()}
+
+
+def test_demo_is_small_and_complete():
+    size = sum(f.stat().st_size for f in DEMO_DIR.rglob("*") if f.is_file())
+    assert size <= 15e6
+    info = json.loads((DEMO_DIR / "dataset" / "meta" / "info.json").read_text())
+    assert info["codebase_version"] == "v3.0" and info["total_episodes"] >= 2
+    assert {"observation.images.front", "observation.images.wrist"} <= set(info["features"])
+
+
+def test_every_rollout_has_gt_from_the_dataset(demo):
+    for tl in demo.values():
+        assert tl.has_gt_joints and tl.gt.source.startswith("dataset")
+        assert set(tl.video_views()) == {"front", "wrist"}
+
+
+def test_tempo_fault(demo):
+    tl = demo["tempo_0.8x"]
+    assert tl.tempo == pytest.approx(0.8, abs=0.05)
+    assert tl.best_match_drift.mean() < 2.0
+    assert tl.time_aligned_drift.mean() > 4 * tl.best_match_drift.mean()
+    assert demo["prompt_train"].tempo == pytest.approx(1.0, abs=0.05)
+
+
+def test_bias_fault(demo):
+    tl = demo["bias_elbow"]
+    err = np.abs(tl.joint_error)
+    assert err[-20:, ELBOW].mean() == pytest.approx(15.0, abs=2.0)  # grown to 15 deg by the end
+    assert err[:20, ELBOW].mean() < 2.0
+    assert int(np.argmax(err[-50:].mean(axis=0))) == ELBOW
+    per_chunk = tl.per_chunk(tl.time_aligned_drift)
+    assert per_chunk[-1] > 5 * per_chunk[0]
+
+
+def test_limit_fault(demo):
+    tl = demo["limits_wrist"]
+    assert tl.limit_violation[:, WRIST_FLEX].sum() > 0
+    assert tl.pred[:, WRIST_FLEX].max() > 110 and tl.pred[:, GRIPPER].min() < -15
+    for clean in ("tempo_0.8x", "bias_elbow", "prompt_train"):
+        assert demo[clean].limit_violation[:, WRIST_FLEX].sum() == 0
+
+
+def test_overrun_fault(demo):
+    tl = demo["overrun_60chunks"]
+    assert tl.n_chunks == 60 and tl.episode_end_step is not None
+    post_chunks = int((tl.chunk_start_step >= tl.episode_end_step).sum())
+    assert post_chunks >= 10
+    assert tl.post_episode.sum() == tl.n_steps - tl.episode_end_step
+    for other in ("tempo_0.8x", "bias_elbow"):
+        assert demo[other].episode_end_step is None
+
+
+def test_prompt_pair_diverges_two_chunks_then_collapses(demo):
+    a, b = demo["prompt_train"], demo["prompt_novel"]
+    assert a.rollout.prompt != b.rollout.prompt
+    _, per_chunk, collapse = prompt_divergence(a.pred, b.pred, a.executed_per_chunk)
+    assert per_chunk[:2].min() > 8.0 and per_chunk[2:].max() < 2.0
+    assert collapse == 2
+
+
+def test_single_chunk_error_grows_along_the_horizon(demo):
+    singles = [tl for tag, tl in demo.items() if tag.startswith("single_")]
+    assert len(singles) >= 5
+    for tl in singles:
+        mse = tl.chunk_errors.per_step_mse
+        assert mse[0] < 0.5 and mse[-1] > 20 and mse[-1] > mse[len(mse) // 2] > mse[0]
+
+
+def test_report_shows_each_fault(demo):
+    out = subprocess.run([sys.executable, "-m", "inspector", "report", str(DEMO_DIR)],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    for tag in demo:
+        assert tag in out.stdout
+    assert "Prompt divergence" in out.stdout
+
+
+def _osmesa_available() -> str | None:
+    probe = subprocess.run([sys.executable, "-c", "from inspector.demo.scene import DemoScene, REST_POSE;"
+                            "DemoScene(32, 24, msaa=0, shadows=False).render(REST_POSE)"],
+                           capture_output=True, text=True, timeout=120)
+    return None if probe.returncode == 0 else (probe.stderr.strip().splitlines() or ["no output"])[-1]
+
+
+@pytest.mark.slow
+def test_quick_rebuild(tmp_path):
+    reason = _osmesa_available()
+    if reason is not None:
+        pytest.skip(f"offscreen MuJoCo rendering unavailable: {reason}")
+    out = subprocess.run([sys.executable, "-m", "inspector", "demo", "--rebuild", "--quick", "--out", str(tmp_path / "d")],
+                         capture_output=True, text=True, timeout=900)
+    assert out.returncode == 0, out.stderr
+    session = open_session(tmp_path / "d")
+    assert not session.errors and {"tempo_0.8x", "limits_wrist"} <= set(session.rollouts)
+    tl = build_timeline(session.rollouts["tempo_0.8x"])
+    assert tl.has_gt_joints and tl.time_aligned_drift.mean() > tl.best_match_drift.mean()
+    assert len(session.rollouts["tempo_0.8x"].video("front")) == tl.n_steps
