@@ -10,6 +10,7 @@ are what to compare between runs. ``--quick`` uses fewer repetitions (under a mi
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
@@ -18,7 +19,7 @@ import tempfile
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -122,24 +123,32 @@ def _fixture_rollout(tmp: Path):
     return dest, open_session(dest).rollouts["ep000_train"]
 
 
-def bench_open(tmp: Path, quick: bool) -> Figure:
-    """A 60-chunk rollout with its GT and three views ready to scrub, through the app's own path."""
+@contextlib.contextmanager
+def _app_tab(tmp: Path) -> Iterator[tuple[object, object]]:
+    """The app serving the fixture session, with one headless tab connected: yields (tab, rollout key)."""
     from inspector.app import HeadlessClient, InspectorApp
     from inspector.sources import open_sources
-    from inspector.timeline import build_timeline
 
-    session_dir, rollout = _fixture_rollout(tmp)
+    session_dir, _ = _fixture_rollout(tmp)
     app = InspectorApp(open_sources([session_dir]), port=_free_port())
     try:
         with HeadlessClient(app.port):
             tab = app.wait_for_tabs(1)[0]
-            key = next(k for k in app.catalog.keys() if k.endswith("ep000_train"))
-            start = time.perf_counter()
-            tab.open(key)
-            tab.loaded.frames.wait_ready(timeout=60)
-            ours = time.perf_counter() - start
+            yield tab, next(k for k in app.catalog.keys() if k.endswith("ep000_train"))
     finally:
         app.stop()
+
+
+def bench_open(tmp: Path, quick: bool) -> Figure:
+    """A 60-chunk rollout with its GT and three views ready to scrub, through the app's own path."""
+    from inspector.timeline import build_timeline
+
+    _, rollout = _fixture_rollout(tmp)
+    with _app_tab(tmp) as (tab, key):
+        start = time.perf_counter()
+        tab.open(key)
+        tab.loaded.frames.done.wait(timeout=60)
+        ours = time.perf_counter() - start
 
     def naive() -> None:  # one thread, full-size GT decoded then resized in numpy
         from inspector.metrics import resize_frames
@@ -159,27 +168,18 @@ def bench_open(tmp: Path, quick: bool) -> Figure:
 
 def bench_scrub(tmp: Path, quick: bool) -> Figure:
     """One scrub step server-side (FK, both arms, video frames, plot cursor): median of 200."""
-    from inspector.app import HeadlessClient, InspectorApp
-    from inspector.sources import open_sources
-
-    session_dir, rollout = _fixture_rollout(tmp)
-    app = InspectorApp(open_sources([session_dir]), port=_free_port())
-    try:
-        with HeadlessClient(app.port):
-            tab = app.wait_for_tabs(1)[0]
-            key = next(k for k in app.catalog.keys() if k.endswith("ep000_train"))
-            tab.open(key)
-            tab.loaded.frames.wait_ready(timeout=60)
-            rng = np.random.default_rng(0)
-            steps = rng.integers(0, tab.loaded.timeline.n_steps, size=60 if quick else 200)
-            times = []
-            for s in steps:
-                t = time.perf_counter()
-                tab.set_step(int(s))
-                times.append(time.perf_counter() - t)
-            ours = float(np.median(times))
-    finally:
-        app.stop()
+    _, rollout = _fixture_rollout(tmp)
+    with _app_tab(tmp) as (tab, key):
+        tab.open(key)
+        tab.loaded.frames.done.wait(timeout=60)
+        rng = np.random.default_rng(0)
+        steps = rng.integers(0, tab.loaded.timeline.n_steps, size=60 if quick else 200)
+        times = []
+        for s in steps:
+            t = time.perf_counter()
+            tab.set_step(int(s))
+            times.append(time.perf_counter() - t)
+        ours = float(np.median(times))
 
     # baseline: the same frames decoded from the file on every step (seek + decode)
     import av
