@@ -1,6 +1,17 @@
 """``inspector`` command line: import, info, report, serve, export, demo.
 
 Bad input ends with exit code 2 and one line ``error: <file>: <what is wrong>``, never a traceback.
+What counts as bad input, per command:
+
+- ``import``: all or nothing. Any unreadable source rollout (or dataset, with ``--dataset``) is
+  exit 2, and nothing is written: no session, no temporary directory.
+- ``info``: describes PATH. Exit 2 when PATH itself cannot be read (its ``session.json``, the
+  dataset's ``meta/`` files, a rollout directory named directly); a session's broken rollouts are
+  listed under ``errors`` with exit 0 (info is how one finds out what is broken).
+- ``report``: exit 2 when a path is unusable or nothing could be reported (no rollouts, or every one
+  broken); otherwise exit 0, broken rollouts listed under ``errors``.
+- ``export``: writes every rollout it can; each broken one prints its own ``error:`` line, leaves no
+  file, and makes the exit code 2.
 """
 
 from __future__ import annotations
@@ -129,6 +140,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # output piped into head & co.
         sys.stderr.close()
         return 0
+    except OSError as exc:  # disk full, permission denied, a file where a directory should be
+        print(f"error: {InspectorError(exc.filename or '-', exc.strerror or str(exc))}", file=sys.stderr)
+        return EXIT_BAD_INPUT
 
 
 if __name__ == "__main__":

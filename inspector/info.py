@@ -11,9 +11,10 @@ from .session import is_rollout, is_session, load_rollout, open_session
 
 def describe(path: Path) -> dict[str, Any]:
     """A JSON-ready description of a dataset (``format: lerobot``) or a session (``session``)."""
-    from .lerobot_dataset import LeRobotDataset, is_lerobot_dataset
+    from .lerobot_dataset import INFO_PATH, LeRobotDataset, is_lerobot_dataset
 
-    if is_lerobot_dataset(path):
+    # meta/info.json present but unreadable: say what is wrong with it, not "neither ... nor"
+    if is_lerobot_dataset(path) or ((path / INFO_PATH).is_file() and not is_session(path)):
         ds = LeRobotDataset(path)
         return {
             "format": "lerobot",

@@ -57,6 +57,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .errors import InspectorError
+from .session import ABSURD_VALUE
 from .units import JOINT_NAMES, Units, canonical_joint_name, guess_arm_units, joint_order, parse_units
 from .video import VideoClip
 
@@ -127,10 +128,10 @@ FRAME_COUNT_SLACK = 1
 
 def is_lerobot_dataset(path: str | Path) -> bool:
     """True when ``path/meta/info.json`` exists and names a ``codebase_version``."""
-    info = Path(path).expanduser() / INFO_PATH
+    info = _expand(path) / INFO_PATH
     try:
         return isinstance(obj := json.loads(info.read_text()), dict) and CODEBASE_VERSION_KEY in obj
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return False
 
 
@@ -145,11 +146,11 @@ def lerobot_home_dirs() -> list[Path]:
     """
     dirs: list[Path] = []
     if os.environ.get("HF_LEROBOT_HOME"):
-        dirs.append(Path(os.environ["HF_LEROBOT_HOME"]).expanduser())
+        dirs.append(_expand(os.environ["HF_LEROBOT_HOME"]))
     if os.environ.get("HF_HOME"):
-        dirs.append(Path(os.environ["HF_HOME"]).expanduser() / "lerobot")
+        dirs.append(_expand(os.environ["HF_HOME"]) / "lerobot")
     if os.environ.get("XDG_CACHE_HOME"):
-        dirs.append(Path(os.environ["XDG_CACHE_HOME"]).expanduser() / "huggingface" / "lerobot")
+        dirs.append(_expand(os.environ["XDG_CACHE_HOME"]) / "huggingface" / "lerobot")
     dirs.append(Path.home() / ".cache" / "huggingface" / "lerobot")
     unique: list[Path] = []
     for d in dirs:
@@ -166,7 +167,7 @@ def find_dataset(path_or_repo_id: str | Path) -> Path:
     Raises:
         InspectorError: not a dataset, or not found locally (the message says how to get it).
     """
-    path = Path(path_or_repo_id).expanduser()
+    path = _expand(path_or_repo_id)
     if path.is_dir():
         if not (path / INFO_PATH).is_file():
             raise InspectorError(path / INFO_PATH, "not a LeRobot dataset: meta/info.json is missing")
@@ -333,7 +334,7 @@ class LeRobotDataset:
     """
 
     def __init__(self, root: str | Path) -> None:
-        self.root = Path(root).expanduser()
+        self.root = _expand(root)
         self._info_file = self.root / INFO_PATH
         info = self._read_info()
         self.info: dict[str, Any] = info
@@ -383,7 +384,7 @@ class LeRobotDataset:
             info = json.loads(f.read_text())
         except (OSError, UnicodeDecodeError) as exc:
             raise InspectorError(f, f"cannot read: {exc}") from None
-        except json.JSONDecodeError as exc:
+        except (ValueError, RecursionError) as exc:  # bad JSON, an int of 5000 digits, [[[[...
             raise InspectorError(f, f"invalid JSON: {exc}") from None
         if not isinstance(info, dict):
             raise InspectorError(f, "expected a JSON object")
@@ -401,9 +402,10 @@ class LeRobotDataset:
 
     def _info_number(self, key: str, positive: bool = False) -> float:
         value = self.info.get(key)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or (positive and value <= 0):
-            raise InspectorError(self._info_file, f"'{key}' must be a {'positive ' if positive else ''}"
-                                                  f"number, found {value!r}")
+        if (isinstance(value, bool) or not isinstance(value, (int, float))
+                or not (isinstance(value, int) or np.isfinite(value)) or value < 0 or (positive and value == 0)):
+            raise InspectorError(self._info_file, f"'{key}' must be a {'positive' if positive else 'non-negative'}"
+                                                  f" number, found {value!r}")
         return value
 
     def _info_template(self, key: str, default: str) -> str:
@@ -516,6 +518,7 @@ class LeRobotDataset:
                 if any(row[c] is None for c in needed if c != EP_TASKS):
                     raise InspectorError(f, f"row {row_no}: null in "
                                             f"{[c for c in needed if row[c] is None and c != EP_TASKS]}")
+                _check_episode(f, f"row {row_no}", row[EPISODE_INDEX_KEY], row[EP_LENGTH])
                 ep = int(row[EPISODE_INDEX_KEY])
                 data_file = self._format_path(DATA_PATH_KEY, self.data_path,
                                               chunk_index=row[EP_DATA_CHUNK], file_index=row[EP_DATA_FILE])
@@ -536,9 +539,10 @@ class LeRobotDataset:
             try:
                 ep, length = int(row[EPISODE_INDEX_KEY]), int(row[EP_LENGTH])
                 tasks = [str(t) for t in row.get(EP_TASKS) or []]
-            except (KeyError, TypeError, ValueError):
+            except (KeyError, TypeError, ValueError, OverflowError):
                 raise InspectorError(f, f"line {line_no}: needs integer '{EPISODE_INDEX_KEY}' and "
                                         f"'{EP_LENGTH}'") from None
+            _check_episode(f, f"line {line_no}", ep, length)
             chunk = ep // self.chunks_size
             data_file = self._format_path(DATA_PATH_KEY, self.data_path, episode_chunk=chunk,
                                           episode_index=ep)
@@ -573,9 +577,11 @@ class LeRobotDataset:
         f = self.root / V21_TASKS_PATH
         pairs = []
         for line_no, row in _read_jsonl(f):
-            if TASK_INDEX_KEY not in row or "task" not in row:
-                raise InspectorError(f, f"line {line_no}: needs '{TASK_INDEX_KEY}' and 'task'")
-            pairs.append((int(row[TASK_INDEX_KEY]), str(row["task"])))
+            try:
+                pairs.append((int(row[TASK_INDEX_KEY]), str(row["task"])))
+            except (KeyError, TypeError, ValueError, OverflowError):
+                raise InspectorError(f, f"line {line_no}: needs integer '{TASK_INDEX_KEY}' and "
+                                        f"'task'") from None
         return [task for _, task in sorted(pairs)]
 
     # --- episode data -----------------------------------------------------------------------------
@@ -612,10 +618,11 @@ class LeRobotDataset:
         for key in (STATE_KEY, ACTION_KEY):
             values = _fixed_width(table.column(key), len(JOINT_NAMES), f, key)[rows]
             values = values[:, self._order[key]]
-            bad = ~np.isfinite(values)
+            bad = ~np.isfinite(values) | (np.abs(values) > ABSURD_VALUE)
             if bad.any():
                 r, j = np.argwhere(bad)[0]
-                raise InspectorError(f, f"{key}: non-finite value {values[r, j]} in episode {info.index} "
+                kind = "non-finite" if not np.isfinite(values[r, j]) else "absurd"
+                raise InspectorError(f, f"{key}: {kind} value {values[r, j]:g} in episode {info.index} "
                                         f"at frame_index {cols[FRAME_INDEX_KEY][r]} (row {r} of the "
                                         f"episode), joint {JOINT_NAMES[j]}")
             joints.append(values)
@@ -640,6 +647,11 @@ class LeRobotDataset:
 # ==================================================================================================
 # helpers
 # ==================================================================================================
+
+def _expand(path: str | Path) -> Path:
+    """``~`` expanded; an unknown ``~user`` stays as written (``Path.expanduser`` would raise)."""
+    return Path(os.path.expanduser(path))
+
 
 def _camera_name(video_key: str) -> str:
     """``observation.images.front`` -> ``front``."""
@@ -680,18 +692,29 @@ def _read_jsonl(f: Path) -> list[tuple[int, dict[str, Any]]]:
     """(line number, object) for every non-empty line of a JSON-lines file."""
     if not f.is_file():
         raise InspectorError(f, "file not found")
+    try:
+        text = f.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InspectorError(f, f"cannot read: {exc}") from None
     out = []
-    for line_no, line in enumerate(f.read_text().splitlines(), start=1):
+    for line_no, line in enumerate(text.splitlines(), start=1):
         if not line.strip():
             continue
         try:
             row = json.loads(line)
-        except json.JSONDecodeError as exc:
+        except (ValueError, RecursionError) as exc:
             raise InspectorError(f, f"line {line_no}: invalid JSON ({exc})") from None
         if not isinstance(row, dict):
             raise InspectorError(f, f"line {line_no}: expected a JSON object")
         out.append((line_no, row))
     return out
+
+
+def _check_episode(f: Path, where: str, index: Any, length: Any) -> None:
+    """An episode's metadata row names a non-negative index and a positive length."""
+    if not index >= 0 or not length >= 1:
+        raise InspectorError(f, f"{where}: '{EPISODE_INDEX_KEY}' must be >= 0 and '{EP_LENGTH}' >= 1, "
+                                f"found {index} and {length}")
 
 
 def _describe_indices(indices: list[int]) -> str:

@@ -56,6 +56,9 @@ RolloutKind = Literal["single_chunk", "autoregressive"]
 KINDS: tuple[str, ...] = ("single_chunk", "autoregressive")
 _TAG = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,127}$")
 _VIEW = _TAG
+# Joint values beyond this are no angle or gripper reading; it also keeps every squared distance
+# the metrics take far below float64's overflow (~1e154 per value).
+ABSURD_VALUE = 1e100
 
 
 # ----------------------------------------------------------------------------------------------
@@ -160,7 +163,7 @@ class Session:
         ds = self.gt_source.get("dataset")
         if not ds:
             return None
-        p = Path(ds).expanduser()
+        p = Path(os.path.expanduser(ds))  # Path.expanduser raises on '~nosuchuser'
         return p if p.is_absolute() else (self.root / p).resolve()
 
     def tags(self) -> list[str]:
@@ -181,8 +184,8 @@ def read_json_object(path: Path) -> dict[str, Any]:
         raise InspectorError(path, "file not found")
     try:
         data = json.loads(path.read_text())
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InspectorError(path, f"invalid JSON ({exc})") from None
+    except (ValueError, RecursionError) as exc:  # bad UTF-8, bad JSON, an int of 5000 digits, [[[[...
+        raise InspectorError(path, f"invalid JSON ({type(exc).__name__}: {exc})") from None
     require(isinstance(data, dict), path, f"expected a JSON object, found {type(data).__name__}")
     return data
 
@@ -209,6 +212,9 @@ def open_session(root: str | Path) -> Session:
     require(robot == "so101", meta_path, f"robot: only 'so101' is supported, found {robot!r}")
     for key in ("gt_source", "model"):
         require(isinstance(meta.get(key, {}), dict), meta_path, f"{key}: expected an object")
+    dataset = meta.get("gt_source", {}).get("dataset")
+    require(dataset is None or (isinstance(dataset, str) and "\x00" not in dataset), meta_path,
+            f"gt_source.dataset: expected a path string, found {dataset!r}")
     session = Session(
         root=root,
         name=str(meta.get("name", root.name)),
@@ -219,6 +225,7 @@ def open_session(root: str | Path) -> Session:
         model=dict(meta.get("model", {})),
     )
     rollouts_dir = root / ROLLOUTS_DIR
+    require(not rollouts_dir.exists() or rollouts_dir.is_dir(), rollouts_dir, "expected a directory")
     if rollouts_dir.is_dir():
         for child in sorted(rollouts_dir.iterdir()):
             if child.name.startswith(".") or not child.is_dir():
@@ -268,7 +275,10 @@ def load_rollout(root: str | Path, units: Units | None = None) -> Rollout:
     horizon = get("horizon", int, 24)
     executed = get("executed_per_chunk", int, 9)
     frames_per_chunk = get("frames_per_chunk", int, 9)
-    fps = float(get("fps", (int, float), 30))
+    try:
+        fps = float(get("fps", (int, float), 30))
+    except OverflowError:  # an integer past float range
+        raise InspectorError(meta_path, f"fps: must be a finite number, found {meta['fps']}") from None
     start_frame = get("start_frame", int, 0)
     episode_index = get("episode_index", (int, type(None)), None)
     for name, value in (("horizon", horizon), ("executed_per_chunk", executed),
@@ -278,16 +288,20 @@ def load_rollout(root: str | Path, units: Units | None = None) -> Rollout:
             f"executed_per_chunk: {executed} exceeds horizon {horizon}")
     require(np.isfinite(fps) and fps > 0, meta_path, f"fps: must be > 0, found {fps}")
     require(start_frame >= 0, meta_path, f"start_frame: must be >= 0, found {start_frame}")
+    require(episode_index is None or episode_index >= 0, meta_path,
+            f"episode_index: must be >= 0, found {episode_index}")
     views = get("views", list, [])
     require(all(isinstance(v, str) and _VIEW.match(v) for v in views), meta_path,
             f"views: expected names like 'front', found {views}")
+    require(len(set(views)) == len(views), meta_path, f"views: listed twice in {views}")
     gt = get("gt", dict, {})
     gt_views = gt.get("views", [])
     require(isinstance(gt_views, list) and all(isinstance(v, str) and _VIEW.match(v) for v in gt_views),
             meta_path, f"gt.views: expected names like 'front', found {gt_views}")
+    require(len(set(gt_views)) == len(gt_views), meta_path, f"gt.views: listed twice in {gt_views}")
     gt_len = gt.get("episode_length")
-    require(gt_len is None or (isinstance(gt_len, int) and gt_len > 0), meta_path,
-            f"gt.episode_length: expected a positive integer, found {gt_len!r}")
+    require(gt_len is None or (isinstance(gt_len, int) and not isinstance(gt_len, bool) and gt_len > 0),
+            meta_path, f"gt.episode_length: expected a positive integer, found {gt_len!r}")
 
     actions = load_array(root / ACTIONS_FILE, ("n_chunks", horizon, len(JOINT_NAMES)))
     require(actions.shape[0] >= 1, root / ACTIONS_FILE, "no chunks (shape[0] == 0)")
@@ -300,6 +314,7 @@ def load_rollout(root: str | Path, units: Units | None = None) -> Rollout:
     gt_actions = None
     if (root / GT_DIR / ACTIONS_FILE).exists():
         gt_actions = load_array(root / GT_DIR / ACTIONS_FILE, ("T", len(JOINT_NAMES)))
+        require(gt_actions.shape[0] >= 1, root / GT_DIR / ACTIONS_FILE, "no GT steps (shape[0] == 0)")
     for view in views:
         require((root / VIDEO_DIR / f"{view}.mp4").is_file(), root / VIDEO_DIR / f"{view}.mp4",
                 f"imagined video for view {view!r} not found")
@@ -339,11 +354,25 @@ def load_array(path: Path, shape: tuple[int | str, ...]) -> npt.NDArray[np.float
     require(arr.ndim == len(shape) and all(isinstance(e, str) or e == a for e, a in zip(shape, arr.shape)),
             path, f"shape: expected {pattern}, found {tuple(arr.shape)}")
     arr = arr.astype(np.float64, copy=False)
+    check_values(arr, path)
+    return arr
+
+
+def check_values(arr: npt.NDArray[np.float64], file: str | Path, what: str = "") -> None:
+    """Raise unless every value is finite and no larger than :data:`ABSURD_VALUE` in magnitude.
+
+    Args:
+        what: prefix naming the field (e.g. ``"actions_pred: "``), empty for a whole file.
+    """
     bad = ~np.isfinite(arr)
     if bad.any():
         where = tuple(int(i) for i in np.argwhere(bad)[0])
-        raise InspectorError(path, f"non-finite value {arr[where]} at index {list(where)}")
-    return arr
+        raise InspectorError(file, f"{what}non-finite value {arr[where]} at index {list(where)}")
+    huge = np.abs(arr) > ABSURD_VALUE
+    if huge.any():
+        where = tuple(int(i) for i in np.argwhere(huge)[0])
+        raise InspectorError(file, f"{what}absurd value {arr[where]:g} at index {list(where)} "
+                                   f"(joint values must lie within +-{ABSURD_VALUE:g})")
 
 
 def _as_tuple(kind: type | tuple[type, ...]) -> tuple[type, ...]:
@@ -509,7 +538,8 @@ class SessionWriter:
             raise InspectorError(tag, "rollout tag must be 1-128 letters, digits or _.- (not starting with . _ -)")
         dest = self.root / ROLLOUTS_DIR / tag
         if tag in self.tags or (dest.exists() and not overwrite):
-            raise InspectorError(dest, f"rollout {tag!r} already exists in this session")
+            raise InspectorError((self._final or self.root) / ROLLOUTS_DIR / tag,
+                                 f"rollout {tag!r} already exists in this session")
         actions_arr = np.asarray(actions, dtype=np.float64)
         staged = Path(tempfile.mkdtemp(prefix=f".{tag}.", suffix=".partial", dir=self.root / ROLLOUTS_DIR))
         try:
@@ -541,6 +571,11 @@ class SessionWriter:
             write_json_atomic(staged / ROLLOUT_FILE, meta)
             load_rollout(staged, self.units)  # validate before it becomes visible
             _replace_dir(staged, dest, overwrite)
+        except InspectorError as exc:
+            shutil.rmtree(staged, ignore_errors=True)
+            # name the file where it would have been, not in the temporary directory that is gone
+            final = (self._final or self.root) / ROLLOUTS_DIR / tag
+            raise InspectorError(exc.file.replace(str(staged), str(final)), exc.what) from None
         except BaseException:
             shutil.rmtree(staged, ignore_errors=True)
             raise

@@ -7,6 +7,7 @@ as long as the returned :class:`Sources`.
 
 from __future__ import annotations
 
+import os
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,30 +49,39 @@ def open_sources(paths: Sequence[str | Path], dataset: str | Path | None = None)
         InspectorError: a path is missing or is none of the above.
     """
     out = Sources()
-    for raw in paths:
-        path = Path(raw).expanduser()
-        if not path.exists():
-            raise InspectorError(path, "not found")
-        path = path.resolve()
-        if is_session(path):
-            session = open_session(path)
-        elif is_rollout(path) and is_session(path.parent.parent):
-            session = open_session(path.parent.parent)
-            keep = path.name
-            session.rollouts = {k: v for k, v in session.rollouts.items() if k == keep}
-            session.errors = {k: v for k, v in session.errors.items() if k == keep}
-        else:
-            from .importers.dreamzero_so101 import find_sources, load_in_memory
-
-            find_sources(path)  # raises a clear error when there is nothing to import
-            session_path, handle = load_in_memory(path, dataset=dataset)
-            out._temps.append(handle)
-            session = open_session(session_path)
-            out.roots.append(Path(handle.name))
-        if dataset is not None and session.dataset_root is None:
-            from .lerobot_dataset import find_dataset
-
-            session.gt_source["dataset"] = str(find_dataset(dataset))
-        out.sessions.append(session)
-        out.roots.append(session.root.resolve())
+    try:
+        for raw in paths:
+            _open_one(out, raw, dataset)
+    except BaseException:
+        out.close()  # temporary sessions of the paths already opened
+        raise
     return out
+
+
+def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None) -> None:
+    """Open one path of :func:`open_sources` into ``out``."""
+    path = Path(os.path.expanduser(raw))  # '~nosuchuser' stays as it is: not found
+    if not path.exists():
+        raise InspectorError(path, "not found")
+    path = path.resolve()
+    if is_session(path):
+        session = open_session(path)
+    elif is_rollout(path) and is_session(path.parent.parent):
+        session = open_session(path.parent.parent)
+        keep = path.name
+        session.rollouts = {k: v for k, v in session.rollouts.items() if k == keep}
+        session.errors = {k: v for k, v in session.errors.items() if k == keep}
+    else:
+        from .importers.dreamzero_so101 import find_sources, load_in_memory
+
+        find_sources(path)  # raises a clear error when there is nothing to import
+        session_path, handle = load_in_memory(path, dataset=dataset)
+        out._temps.append(handle)
+        session = open_session(session_path)
+        out.roots.append(Path(handle.name))
+    if dataset is not None and session.dataset_root is None:
+        from .lerobot_dataset import find_dataset
+
+        session.gt_source["dataset"] = str(find_dataset(dataset))
+    out.sessions.append(session)
+    out.roots.append(session.root.resolve())

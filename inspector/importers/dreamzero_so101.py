@@ -28,7 +28,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import InspectorError, require
-from ..session import SessionWriter, load_array, read_json_object
+from ..session import SessionWriter, check_values, load_array, read_json_object
 from ..units import JOINT_NAMES, Units
 from ..video import decode
 
@@ -65,7 +65,7 @@ def _classify(path: Path) -> SourceDir | None:
     if meta.is_file():
         try:
             data = json.loads(meta.read_text())
-        except (ValueError, UnicodeDecodeError):
+        except (ValueError, RecursionError):
             # looks like ours only by name: let the importer report it properly
             return SourceDir(path, "single_chunk")
         if isinstance(data, dict) and "actions_pred" in data:
@@ -130,7 +130,11 @@ def load_in_memory(src: str | Path, **kwargs: Any) -> tuple[Path, tempfile.Tempo
     """
     handle = tempfile.TemporaryDirectory(prefix="inspector-session-")
     dest = Path(handle.name) / Path(src).resolve().name
-    import_dreamzero(src, dest, log=lambda _: None, **kwargs)
+    try:
+        import_dreamzero(src, dest, log=lambda _: None, **kwargs)
+    except BaseException:
+        handle.cleanup()  # a failed import leaves no temporary directory behind
+        raise
     return dest, handle
 
 
@@ -142,6 +146,7 @@ def _autoregressive(path: Path) -> dict[str, Any]:
     meta = read_json_object(meta_path)
     actions = load_array(path / "action_trace.npy", ("n_chunks", "horizon", len(JOINT_NAMES)))
     n_chunks, horizon, _ = actions.shape
+    require(n_chunks >= 1, path / "action_trace.npy", "no chunks (shape[0] == 0)")
     states = None
     if (path / "state_trace.npy").exists():
         states = load_array(path / "state_trace.npy", (n_chunks + 1, len(JOINT_NAMES)))
@@ -154,7 +159,7 @@ def _autoregressive(path: Path) -> dict[str, Any]:
         chained = bool(np.allclose(states[1:], actions[:, executed - 1], atol=1e-6))
     views = _views(path, ROLLOUT_VIEW_PREFIX)
     gt_views = _views(path, "gt_")
-    episode_length = meta.get("episode_length")
+    episode_length = _length_field(meta, meta_path)
     return dict(
         kind="autoregressive",
         actions=actions,
@@ -166,7 +171,7 @@ def _autoregressive(path: Path) -> dict[str, Any]:
         frames_per_chunk=executed,
         videos={v: path / f"{ROLLOUT_VIEW_PREFIX}{v}.mp4" for v in views},
         gt_videos={v: path / f"gt_{v}.mp4" for v in gt_views},
-        gt_episode_length=episode_length if isinstance(episode_length, int) else None,
+        gt_episode_length=episode_length,
         extra=_extra(meta, path, chained_states=chained,
                      initial_state=meta.get("initial_state", states[0].tolist() if states is not None else None)),
     )
@@ -184,6 +189,8 @@ def _single_chunk(path: Path, scratch: Path) -> dict[str, Any]:
     videos = _split_views(path, "pred_", "predicted_video.mp4", scratch / "pred")
     gt_videos = _split_views(path, "gt_", "gt_future.mp4", scratch / "gt")
     executed = min(9, pred.shape[0])
+    frames = _int_field(meta, "predicted_frames", meta_path, default=9)
+    require(frames >= 1, meta_path, f"predicted_frames: must be >= 1, found {frames}")
     return dict(
         kind="single_chunk",
         actions=pred[None],
@@ -191,11 +198,11 @@ def _single_chunk(path: Path, scratch: Path) -> dict[str, Any]:
         episode_index=_int_field(meta, "episode", meta_path, default=None),
         start_frame=_int_field(meta, "frame_in_ep", meta_path, default=0),
         executed_per_chunk=executed,
-        frames_per_chunk=_int_field(meta, "predicted_frames", meta_path, default=9),
+        frames_per_chunk=frames,
         gt_actions=gt,
         videos=videos,
         gt_videos=gt_videos,
-        gt_episode_length=meta.get("episode_length") if isinstance(meta.get("episode_length"), int) else None,
+        gt_episode_length=_length_field(meta, meta_path),
         extra=_extra(meta, path, initial_state=state_in),
     )
 
@@ -269,9 +276,16 @@ def _matrix_field(meta: dict[str, Any], key: str, path: Path) -> np.ndarray:
         raise InspectorError(path, f"{key}: expected a (horizon, 6) list of numbers") from None
     require(arr.ndim == 2 and arr.shape[1] == len(JOINT_NAMES) and arr.shape[0] >= 1, path,
             f"{key}: expected shape (horizon, {len(JOINT_NAMES)}), found {arr.shape}")
-    bad = np.argwhere(~np.isfinite(arr))
-    require(len(bad) == 0, path, f"{key}: non-finite value at index {bad[0].tolist() if len(bad) else ''}")
+    check_values(arr, path, f"{key}: ")
     return arr
+
+
+def _length_field(meta: dict[str, Any], path: Path) -> int | None:
+    """``episode_length``: absent/null, or a positive integer."""
+    value = meta.get("episode_length")
+    require(value is None or (isinstance(value, int) and not isinstance(value, bool) and value > 0),
+            path, f"episode_length: expected a positive integer, found {value!r}")
+    return value
 
 
 def _unique_tag(path: Path, root: Path, used: set[str]) -> str:

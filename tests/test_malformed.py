@@ -1,0 +1,1021 @@
+"""Malformed input, made from the valid fixtures by mutation, for ``import``, ``info``, ``report``,
+``export`` and the app's catalog; plus hypothesis property tests of the session reader and the
+DreamZero-SO101 importer.
+
+What "bad input" means, per command (the same words are in ``inspector/cli.py``):
+
+- ``import``: all or nothing. Any unreadable source rollout (or dataset, with ``--dataset``) is
+  exit 2 with one line ``error: <file>: <what>``; nothing is written (no session, no
+  ``.<dest>.*.partial`` sibling, no temporary directory).
+- ``info``: describes PATH. Exit 2 when PATH itself cannot be read (``session.json``, a dataset's
+  ``meta/`` files, a rollout directory named directly). A session's broken rollouts are listed
+  under ``errors`` with exit 0.
+- ``report``: exit 2 when a path is unusable or nothing could be reported (no rollouts, or every one
+  broken); otherwise exit 0 with the broken rollouts under ``errors``.
+- ``export``: writes every rollout it can; each broken rollout prints its own ``error:`` line,
+  leaves no file (no ``.rrd``, no ``.partial``) and makes the exit code 2.
+- app: a broken rollout is an entry with an error (an error card); ``Catalog.load`` raises only
+  ``InspectorError``; the other rollouts load.
+
+Not errors: a rollout longer than its episode (its late chunks are "post-episode"), joint values
+far outside the limits (1e30 still reports; only beyond ``ABSURD_VALUE`` = 1e100, where the
+metrics' squared distances would overflow, is a value refused), a dataset that a session names but
+that is gone (the rollouts simply have no dataset GT), two source directories with the same name.
+
+Every CLI case runs ``python -m inspector`` in a subprocess with its own ``TMPDIR`` (which must be
+empty afterwards). The subprocesses of all cases run side by side from one module-scoped fixture:
+each pays a few seconds of torch / FK start-up, which would otherwise dominate the suite.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
+
+from inspector.errors import InspectorError
+from inspector.session import SCHEMA, SessionWriter, open_session
+from inspector.units import JOINT_NAMES
+
+# ==============================================================================================
+# Mutation helpers
+
+
+def copy_tree(src: Path, dst: Path) -> Path:
+    """Copy a (read-only) fixture tree so that it can be mutated."""
+    shutil.copytree(src, dst, copy_function=shutil.copyfile)
+    for p in [dst, *dst.rglob("*")]:
+        os.chmod(p, 0o755 if p.is_dir() else 0o644)
+    return dst
+
+
+def edit_json(path: Path, **fields: Any) -> None:
+    data = json.loads(path.read_text())
+    data.update(fields)
+    path.write_text(json.dumps(data))
+
+
+def drop_json_key(path: Path, key: str) -> None:
+    data = json.loads(path.read_text())
+    del data[key]
+    path.write_text(json.dumps(data))
+
+
+def truncate(path: Path, keep: float = 0.5) -> None:
+    data = path.read_bytes()
+    path.write_bytes(data[: int(len(data) * keep)])
+
+
+def corrupt_middle(path: Path, n: int = 2000) -> None:
+    """Zero ``n`` bytes in the middle: the container still opens, the stream does not decode."""
+    data = bytearray(path.read_bytes())
+    mid = len(data) // 2
+    data[mid:mid + n] = bytes(len(data[mid:mid + n]))
+    path.write_bytes(bytes(data))
+
+
+def npy_bytes(descr: str, shape: tuple, payload: bytes, fortran_order: bool = False) -> bytes:
+    """A hand-made ``.npy`` (format 1.0) with any header, valid or not."""
+    header = f"{{'descr': {descr!r}, 'fortran_order': {fortran_order!r}, 'shape': {shape!r}, }}".encode("latin1")
+    pad = (-(10 + len(header) + 1)) % 64
+    header += b" " * pad + b"\n"
+    return b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header + payload
+
+
+DEEP_JSON = "[" * 100_000  # json.loads -> RecursionError
+HUGE_INT_JSON = '{"fps": 1' + "0" * 5000 + "}"  # json.loads -> ValueError (int digit limit)
+
+
+def set_parquet_column(path: Path, column: str, fn: Callable[[list], list], variable_list: bool = False) -> None:
+    """Rewrite one column of a parquet file (``variable_list``: as a list<float32>, any length)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(path)
+    col = table.column(column)
+    values = fn(col.to_pylist())
+    typ = pa.list_(pa.float32()) if variable_list else col.type
+    table = table.set_column(table.column_names.index(column), column, pa.array(values, type=typ))
+    pq.write_table(table, path)
+
+
+def nan_row(rows: list) -> list:
+    rows = [list(r) for r in rows]
+    rows[5][2] = float("nan")
+    return rows
+
+
+# ==============================================================================================
+# Workspace: valid inputs built once, copied per case
+
+
+class Workspace:
+    """Valid inputs (built once per module) that each case copies into its own directory."""
+
+    def __init__(self, root: Path, fixtures: Path) -> None:
+        from inspector.importers.dreamzero_so101 import import_dreamzero
+
+        self.root, self.fixtures = root, fixtures
+        self.dz = fixtures / "dreamzero_so101"
+        base = root / "base"
+        # three single-chunk rollouts (f000, f084, f169): "one bad rollout of several"
+        self.zs3 = import_dreamzero(self.dz / "zeroshot_chunk", base / "zs3", log=lambda _: None)
+        # one single-chunk rollout: "the only rollout is bad"
+        self.zs1 = import_dreamzero(self.dz / "zeroshot_chunk" / "f084", base / "zs1", log=lambda _: None)
+        self.v30 = copy_tree(fixtures / "lerobot" / "so101_v30", base / "so101_v30")
+        self.ds = self.dataset_session(base / "ds", self.v30)
+
+    @staticmethod
+    def dataset_session(dest: Path, dataset: Path, long: bool = False) -> Path:
+        """A session whose GT comes from a LeRobot dataset (episodes of 150 and 210 frames)."""
+        rng = np.random.default_rng(0)
+        with SessionWriter.create(dest, dataset=dataset, model={"name": "test"}) as w:
+            w.add_rollout("r0", kind="autoregressive", actions=rng.normal(0, 5, (2, 24, 6)),
+                          episode_index=0, start_frame=0, prompt="Pick the red cube")
+            w.add_rollout("r1", kind="autoregressive", actions=rng.normal(0, 5, (2, 24, 6)),
+                          episode_index=1, start_frame=0,
+                          videos={"front": rng.integers(0, 255, (18, 32, 48, 3), dtype=np.uint8)})
+            if long:  # 20 chunks x 9 = 180 steps in a 150-frame episode: 3 chunks start after it
+                w.add_rollout("long", kind="autoregressive", actions=rng.normal(0, 5, (20, 24, 6)),
+                              episode_index=0, start_frame=0)
+                # from frame 140 of 150: 10 steps inside, the third chunk starts after the end
+                w.add_rollout("late", kind="autoregressive", actions=rng.normal(0, 5, (3, 24, 6)),
+                              episode_index=0, start_frame=140)
+        return dest
+
+    # -- copies for one case ------------------------------------------------------------------
+    def session(self, case: Path, which: str = "zs3") -> Path:
+        return copy_tree(getattr(self, which), case / which)
+
+    def ds_session(self, case: Path, dataset: Path | None = None) -> Path:
+        s = copy_tree(self.ds, case / "ds")
+        if dataset is not None:
+            edit_json(s / "session.json", gt_source={"dataset": str(dataset)})
+        return s
+
+    def source(self, case: Path, rel: str) -> Path:
+        """A DreamZero-SO101 source directory, e.g. ``zeroshot_chunk/f084``."""
+        return copy_tree(self.dz / rel, case / "src" / Path(rel).name)
+
+    def dataset(self, case: Path, name: str = "so101_v30") -> Path:
+        return copy_tree(self.fixtures / "lerobot" / name, case / name)
+
+
+AR, SC, MOSAIC = "train_rollout/ep000_train", "zeroshot_chunk/f084", "demo/train_ep0"
+F084 = "rollouts/f084"
+V30_DATA = "data/chunk-000/file-000.parquet"
+V30_FRONT = "videos/observation.images.front/chunk-000/file-000.mp4"
+
+
+# ==============================================================================================
+# The cases
+
+
+@dataclass(frozen=True)
+class Case:
+    """One malformed input and what the command must do with it.
+
+    Attributes:
+        build: ``build(ws, case_dir) -> argv`` makes the input under ``case_dir`` and returns the
+            arguments after ``inspector``; outputs go under ``case_dir / "out"`` (created empty).
+        rc: expected exit code.
+        file: a piece of the path the error must name (``None``: no error expected).
+        field: words the error must contain after the file (the field, or what is wrong).
+        out: what ``case_dir / "out"`` must hold afterwards (names, hidden ones included).
+        check: extra assertions on the finished run.
+    """
+
+    id: str
+    build: Callable[["Workspace", Path], list[Any]]
+    rc: int = 2
+    file: str | None = None
+    field: str | None = None
+    out: tuple[str, ...] = ()
+    check: Callable[["Run"], None] | None = None
+
+
+@dataclass
+class Run:
+    case: Case
+    dir: Path
+    rc: int
+    stdout: str
+    stderr: str
+
+    def json(self) -> Any:
+        return json.loads(self.stdout)
+
+
+def _import(ws: Workspace, d: Path, rel: str, mutate: Callable[[Path], Any], *extra: Any) -> list[Any]:
+    src = ws.source(d, rel)
+    mutate(src)
+    return ["import", "dreamzero-so101", src, "-o", d / "out" / "session", *extra]
+
+
+def _imp(id: str, rel: str, mutate: Callable[[Path], Any], file: str, field: str, *extra: Any) -> Case:
+    return Case(id, lambda ws, d: _import(ws, d, rel, mutate, *extra), file=file, field=field)
+
+
+def _session_cmd(cmd: str, which: str, mutate: Callable[[Path], Any], *extra: Any,
+                 sub: str = "") -> Callable[[Workspace, Path], list[Any]]:
+    def build(ws: Workspace, d: Path) -> list[Any]:
+        s = ws.session(d, which)
+        mutate(s)
+        return [cmd, s / sub if sub else s, *extra]
+    return build
+
+
+def _export_cmd(which: str, mutate: Callable[[Path], Any], *extra: Any, out: str = "x.rrd"):
+    def build(ws: Workspace, d: Path) -> list[Any]:
+        s = ws.session(d, which)
+        mutate(s)
+        return ["export", s, "-o", d / "out" / out if out else d / "out", *extra]
+    return build
+
+
+def _ds_cmd(cmd: str, mutate: Callable[[Workspace, Path, Path], Any], *extra: Any):
+    def build(ws: Workspace, d: Path) -> list[Any]:
+        s = ws.ds_session(d)
+        mutate(ws, d, s)
+        return [cmd, s, *extra]
+    return build
+
+
+def _dataset_cmd(name: str, mutate: Callable[[Path], Any]):
+    def build(ws: Workspace, d: Path) -> list[Any]:
+        ds = ws.dataset(d, name)
+        mutate(ds)
+        return ["info", ds]
+    return build
+
+
+def _listed_error(key_suffix: str, file: str, field: str) -> Callable[[Run], None]:
+    """Exit 0, and the JSON output's ``errors`` has the rollout, naming file and field."""
+    def check(run: Run) -> None:
+        errors = run.json().get("errors", {})
+        hits = [v for k, v in errors.items() if k.endswith(key_suffix)]
+        assert len(hits) == 1, errors
+        assert file in hits[0].split(": ", 1)[0] and field in hits[0], hits[0]
+        assert "\n" not in hits[0]
+    return check
+
+
+def _rows(tags: list[str]) -> Callable[[Run], None]:
+    def check(run: Run) -> None:
+        assert sorted(r["tag"] for r in run.json()["rollouts"]) == sorted(tags)
+    return check
+
+
+def _ok_report_rows(tags: list[str], key_suffix: str, file: str, field: str) -> Callable[[Run], None]:
+    def check(run: Run) -> None:
+        _rows(tags)(run)
+        _listed_error(key_suffix, file, field)(run)
+    return check
+
+
+def _check_long(run: Run) -> None:
+    rows = {r["tag"]: r for r in run.json()["rollouts"]}
+    assert rows["long"]["post_episode_chunks"] == 3 and rows["long"]["time_aligned_drift"] is not None
+    assert rows["late"]["post_episode_chunks"] == 1
+    assert rows["r0"]["post_episode_chunks"] == 0 and "errors" not in run.json()
+
+
+def _check_table_lists_error(run: Run) -> None:
+    """The text report shows the good rollouts and one ``error:`` line for the broken one."""
+    lines = run.stdout.splitlines()
+    assert any(line.startswith("f000 ") for line in lines) and any(line.startswith("f169 ") for line in lines)
+    errors = [line for line in lines if line.startswith("error: ")]
+    assert len(errors) == 1 and "f084/actions.npy" in errors[0] and "not a readable .npy" in errors[0]
+
+
+def _check_absurd_1e30(run: Run) -> None:
+    (row,) = run.json()["rollouts"]
+    assert row["rmse_deg"] > 1e29 and row["limit_violations"]["count"] == 24 * 6
+
+
+def _check_no_dataset_gt(run: Run) -> None:
+    rows = run.json()["rollouts"]
+    assert [r["gt_source"] for r in rows] == ["none", "none"] and all(r["rmse_deg"] is None for r in rows)
+
+
+def _check_dest_untouched(run: Run) -> None:
+    assert (run.dir / "out" / "session" / "keep.txt").read_text() == "mine"
+
+
+def _check_duplicate_tags(run: Run) -> None:
+    s = open_session(run.dir / "out" / "session")
+    assert sorted(s.rollouts) == ["b_f084", "f084"] and not s.errors
+
+
+def _mk_empty(d: Path) -> None:
+    for p in list(d.iterdir()):
+        shutil.rmtree(p) if p.is_dir() else p.unlink()
+
+
+def _two_same_name(ws: Workspace, d: Path) -> list[Any]:
+    src = d / "src"
+    copy_tree(ws.dz / SC, src / "a" / "f084")
+    copy_tree(ws.dz / SC, src / "b" / "f084")
+    return ["import", "dreamzero-so101", src, "-o", d / "out" / "session"]
+
+
+def _dest_exists(ws: Workspace, d: Path) -> list[Any]:
+    (d / "out" / "session").mkdir()
+    (d / "out" / "session" / "keep.txt").write_text("mine")
+    return ["import", "dreamzero-so101", ws.source(d, SC), "-o", d / "out" / "session"]
+
+
+def _dest_under_file(ws: Workspace, d: Path) -> list[Any]:
+    (d / "out" / "file").write_text("x")
+    return ["import", "dreamzero-so101", ws.source(d, SC), "-o", d / "out" / "file" / "session"]
+
+
+def _import_with_dataset(rel: str, mutate_ds: Callable[[Path], Any], *extra: Any):
+    def build(ws: Workspace, d: Path) -> list[Any]:
+        ds = ws.dataset(d)
+        mutate_ds(ds)
+        return ["import", "dreamzero-so101", ws.source(d, rel), "-o", d / "out" / "session",
+                "--dataset", ds, *extra]
+    return build
+
+
+def _ds_with_broken_dataset(mutate: Callable[[Path], Any], cmd: str = "report"):
+    """The dataset session pointed at a copy of the dataset that ``mutate`` breaks."""
+    def build(ws: Workspace, d: Path) -> list[Any]:
+        ds = ws.dataset(d)
+        mutate(ds)
+        return [cmd, ws.ds_session(d, dataset=ds), "--json"]
+    return build
+
+
+def _long_rollouts(ws: Workspace, d: Path) -> list[Any]:
+    return ["report", Workspace.dataset_session(d / "long", ws.v30, long=True), "--json"]
+
+
+def _raw_source_report(ws: Workspace, d: Path) -> list[Any]:
+    src = ws.source(d, SC)
+    edit_json(src / "meta.json", actions_gt=[[1.0] * 6] * 3)
+    return ["report", src]
+
+
+def _same_session_twice(ws: Workspace, d: Path) -> list[Any]:
+    s = ws.session(d, "zs1")
+    return ["report", s, s, "--json"]
+
+
+def _report_dataset_arg_broken(ws: Workspace, d: Path) -> list[Any]:
+    (d / "notads").mkdir()
+    return ["report", ws.session(d, "zs1"), "--dataset", d / "notads"]
+
+
+def _info_rollout_path(ws: Workspace, d: Path) -> list[Any]:
+    s = ws.session(d, "zs3")
+    np.save(s / F084 / "actions.npy", np.zeros((1, 24, 4)))
+    return ["info", s / F084]
+
+
+def _save(rel: str, arr: Any, **kw: Any) -> Callable[[Path], None]:
+    return lambda root: np.save(root / rel, arr, **kw)
+
+
+def _scale_actions(root: Path, value: float, rel: str = F084 + "/actions.npy") -> None:
+    a = np.load(root / rel)
+    np.save(root / rel, np.full_like(a, value))
+
+
+_AR_TRACE = "action_trace.npy"
+
+CASES: list[Case] = [
+    # ---------------------------------------------------------------- import: .npy
+    _imp("import-npy-truncated", AR, lambda s: truncate(s / _AR_TRACE), "action_trace.npy", "not a readable .npy"),
+    _imp("import-npy-bad-header", AR, lambda s: (s / _AR_TRACE).write_bytes(npy_bytes("zz", (60, 24, 6), b"")),
+         "action_trace.npy", "not a readable .npy"),
+    _imp("import-npy-dtype-str", AR, _save(_AR_TRACE, np.full((60, 24, 6), "a")), "action_trace.npy", "dtype <U1"),
+    _imp("import-npy-dtype-complex", AR, _save(_AR_TRACE, np.zeros((60, 24, 6), complex)),
+         "action_trace.npy", "dtype complex128"),
+    _imp("import-npy-object-pickle", AR, _save(_AR_TRACE, np.zeros((60, 24, 6), object), allow_pickle=True),
+         "action_trace.npy", "allow_pickle"),
+    _imp("import-npy-nan", AR, lambda s: np.save(s / _AR_TRACE, np.where(np.arange(6) == 2, np.nan, np.load(s / _AR_TRACE))),
+         "action_trace.npy", "non-finite value nan at index [0, 0, 2]"),
+    _imp("import-state-inf", AR, _save("state_trace.npy", np.full((61, 6), np.inf)), "state_trace.npy", "non-finite"),
+    _imp("import-npy-5-joints", AR, lambda s: np.save(s / _AR_TRACE, np.load(s / _AR_TRACE)[..., :5]),
+         "action_trace.npy", "shape: expected (n_chunks, horizon, 6), found (60, 24, 5)"),
+    _imp("import-state-chunk-count-mismatch", AR, _save("state_trace.npy", np.zeros((59, 6))),
+         "state_trace.npy", "shape: expected (61, 6), found (59, 6)"),
+    _imp("import-zero-chunks", AR, _save(_AR_TRACE, np.zeros((0, 24, 6))), "action_trace.npy", "no chunks"),
+    _imp("import-absurd-1e300", AR, lambda s: np.save(s / _AR_TRACE, np.full((60, 24, 6), 1e300)),
+         "action_trace.npy", "absurd value 1e+300"),
+    # ---------------------------------------------------------------- import: meta.json
+    _imp("import-meta-invalid-json", AR, lambda s: (s / "meta.json").write_text('{"episode": 0,'),
+         "meta.json", "invalid JSON"),
+    _imp("import-meta-not-object", AR, lambda s: (s / "meta.json").write_text("[1, 2]"),
+         "meta.json", "expected a JSON object, found list"),
+    _imp("import-meta-not-utf8", AR, lambda s: (s / "meta.json").write_bytes(b"\xff\xfe{garbage"),
+         "meta.json", "invalid JSON"),
+    _imp("import-meta-deeply-nested", SC, lambda s: (s / "meta.json").write_text(DEEP_JSON),
+         "meta.json", "invalid JSON (RecursionError"),
+    _imp("import-meta-huge-int", AR, lambda s: (s / "meta.json").write_text(HUGE_INT_JSON),
+         "meta.json", "invalid JSON"),
+    _imp("import-frames-per-step-zero", AR, lambda s: edit_json(s / "meta.json", frames_per_step=0),
+         "meta.json", "frames_per_step: 0 must lie in 1..24"),
+    _imp("import-frames-per-step-string", AR, lambda s: edit_json(s / "meta.json", frames_per_step="9"),
+         "meta.json", "frames_per_step: expected a non-negative integer"),
+    _imp("import-episode-negative", AR, lambda s: edit_json(s / "meta.json", episode=-3), "meta.json", "episode:"),
+    _imp("import-prompt-not-string", AR, lambda s: edit_json(s / "meta.json", prompt=5), "meta.json", "prompt:"),
+    _imp("import-episode-length-string", AR, lambda s: edit_json(s / "meta.json", episode_length="x"),
+         "meta.json", "episode_length: expected a positive integer"),
+    _imp("import-sc-actions-nan", SC, lambda s: edit_json(s / "meta.json", actions_pred=[[float("nan")] * 6] * 24),
+         "meta.json", "actions_pred: non-finite"),
+    _imp("import-sc-actions-ragged", SC, lambda s: edit_json(s / "meta.json", actions_pred=[[1] * 6] * 23 + [[1] * 5]),
+         "meta.json", "actions_pred: expected a (horizon, 6) list of numbers"),
+    _imp("import-sc-actions-missing-key", SC, lambda s: drop_json_key(s / "meta.json", "actions_pred"),
+         "f084", "no DreamZero-SO101 rollout found"),
+    _imp("import-sc-gt-shape-mismatch", SC, lambda s: edit_json(s / "meta.json", actions_gt=[[1] * 6] * 12),
+         "meta.json", "actions_gt: shape (12, 6) differs"),
+    _imp("import-sc-predicted-frames-zero", SC, lambda s: edit_json(s / "meta.json", predicted_frames=0),
+         "meta.json", "predicted_frames: must be >= 1"),
+    # ---------------------------------------------------------------- import: video
+    _imp("import-video-truncated", AR, lambda s: truncate(s / "rollout_front.mp4"), "rollout_front.mp4", "cannot read video"),
+    _imp("import-video-not-a-video", AR, lambda s: (s / "rollout_front.mp4").write_text("not a video"),
+         "rollout_front.mp4", "cannot read video"),
+    _imp("import-sc-pred-video-truncated", SC, lambda s: truncate(s / "pred_top.mp4", 0.3), "pred_top.mp4", "cannot read video"),
+    _imp("import-mosaic-truncated", MOSAIC, lambda s: truncate(s / "gt_future.mp4"), "gt_future.mp4", "cannot decode video"),
+    # ---------------------------------------------------------------- import: paths, dataset
+    Case("import-empty-source-dir", lambda ws, d: ["import", "dreamzero-so101", (d / "empty").mkdir() or d / "empty",
+                                                   "-o", d / "out" / "session"],
+         file="empty", field="no DreamZero-SO101 rollout found"),
+    Case("import-missing-source", lambda ws, d: ["import", "dreamzero-so101", d / "nope", "-o", d / "out" / "session"],
+         file="nope", field="not found"),
+    Case("import-dest-exists", _dest_exists, file="out/session", field="already exists", out=("session",),
+         check=_check_dest_untouched),
+    Case("import-dest-under-a-file", _dest_under_file, file="out/file", field="File exists", out=("file",)),
+    Case("import-dataset-episode-beyond", _import_with_dataset(SC, lambda ds: None, "--episode", "9"),
+         file="so101_v30", field="episode 9 is out of range"),
+    Case("import-dataset-start-frame-beyond", _import_with_dataset("zeroshot_chunk/f169", lambda ds: None, "--episode", "0"),
+         file="f169/meta.json", field="start frame 169 lies beyond episode 0 (150 frames)"),
+    Case("import-dataset-unknown-version",
+         _import_with_dataset(SC, lambda ds: edit_json(ds / "meta/info.json", codebase_version="v9.9"), "--episode", "0"),
+         file="meta/info.json", field="codebase_version 'v9.9' is not supported"),
+    Case("import-duplicate-tags-are-renamed", _two_same_name, rc=0, out=("session",), check=_check_duplicate_tags),
+    # ---------------------------------------------------------------- info: session.json
+    Case("info-session-invalid-json", _session_cmd("info", "zs3", lambda s: (s / "session.json").write_text("{")),
+         file="session.json", field="invalid JSON"),
+    Case("info-session-not-object", _session_cmd("info", "zs3", lambda s: (s / "session.json").write_text("null")),
+         file="session.json", field="expected a JSON object"),
+    Case("info-session-unknown-schema",
+         _session_cmd("info", "zs3", lambda s: edit_json(s / "session.json", schema="inspector.session/9")),
+         file="session.json", field="schema: expected 'inspector.session/1'"),
+    Case("info-session-missing-schema", _session_cmd("info", "zs3", lambda s: drop_json_key(s / "session.json", "schema")),
+         file="session.json", field="schema:"),
+    Case("info-session-bad-units",
+         _session_cmd("info", "zs3", lambda s: edit_json(s / "session.json", units={"arm": "radians"})),
+         file="session.json", field="units.arm must be one of"),
+    Case("info-session-five-joint-names",
+         _session_cmd("info", "zs3", lambda s: edit_json(s / "session.json", joint_names=list(JOINT_NAMES[:5]))),
+         file="session.json", field="joint_names: expected"),
+    Case("info-session-dataset-not-a-string",
+         _session_cmd("info", "zs3", lambda s: edit_json(s / "session.json", gt_source={"dataset": 5})),
+         file="session.json", field="gt_source.dataset: expected a path string"),
+    Case("info-extra-keys-are-ignored",
+         _session_cmd("info", "zs3", lambda s: (edit_json(s / "session.json", future_field={"x": 1}),
+                                                edit_json(s / F084 / "rollout.json", future_field=[1, 2])), "--json"),
+         rc=0, check=_rows(["f000", "f084", "f169"])),
+    Case("info-session-rollouts-is-a-file",
+         _session_cmd("info", "zs3", lambda s: (shutil.rmtree(s / "rollouts"), (s / "rollouts").write_text("x"))),
+         file="zs3/rollouts", field="expected a directory"),
+    Case("info-empty-session-is-fine", _session_cmd("info", "zs3", lambda s: _mk_empty(s / "rollouts"), "--json"),
+         rc=0, check=_rows([])),
+    Case("info-one-bad-rollout-json-of-three",
+         _session_cmd("info", "zs3", lambda s: (s / F084 / "rollout.json").write_text("{{"), "--json"),
+         rc=0, check=_listed_error("f084", "f084/rollout.json", "invalid JSON")),
+    Case("info-one-rollout-duplicate-views",
+         _session_cmd("info", "zs3", lambda s: edit_json(s / F084 / "rollout.json", views=["front", "front"]), "--json"),
+         rc=0, check=_listed_error("f084", "f084/rollout.json", "views: listed twice")),
+    Case("info-one-rollout-negative-episode",
+         _session_cmd("info", "zs3", lambda s: edit_json(s / F084 / "rollout.json", episode_index=-1), "--json"),
+         rc=0, check=_listed_error("f084", "f084/rollout.json", "episode_index: must be >= 0")),
+    Case("info-one-rollout-missing-video",
+         _session_cmd("info", "zs3", lambda s: (s / F084 / "video" / "top.mp4").unlink(), "--json"),
+         rc=0, check=_listed_error("f084", "f084/video/top.mp4", "imagined video for view 'top' not found")),
+    Case("info-one-rollout-extra-states-rows",
+         _session_cmd("info", "zs3", _save(F084 + "/states.npy", np.zeros((5, 6))), "--json"),
+         rc=0, check=_listed_error("f084", "f084/states.npy", "shape: expected (2, 6), found (5, 6)")),
+    Case("info-rollout-path-joint-count", _info_rollout_path, file="f084/actions.npy",
+         field="shape: expected (n_chunks, 24, 6), found (1, 24, 4)"),
+    Case("info-missing-path", lambda ws, d: ["info", d / "nowhere"], file="nowhere", field="not found"),
+    # ---------------------------------------------------------------- info: datasets
+    Case("info-dataset-info-invalid-json", _dataset_cmd("so101_v30", lambda ds: (ds / "meta/info.json").write_text("{,")),
+         file="meta/info.json", field="invalid JSON"),
+    Case("info-dataset-info-not-object", _dataset_cmd("so101_v30", lambda ds: (ds / "meta/info.json").write_text("[]")),
+         file="meta/info.json", field="expected a JSON object"),
+    Case("info-dataset-unknown-codebase-version",
+         _dataset_cmd("so101_v30", lambda ds: edit_json(ds / "meta/info.json", codebase_version="v9.9")),
+         file="meta/info.json", field="codebase_version 'v9.9' is not supported"),
+    Case("info-dataset-missing-codebase-version",
+         _dataset_cmd("so101_v30", lambda ds: drop_json_key(ds / "meta/info.json", "codebase_version")),
+         file="meta/info.json", field="codebase_version None is not supported"),
+    Case("info-dataset-total-episodes-nan",
+         _dataset_cmd("so101_v30", lambda ds: (ds / "meta/info.json").write_text(
+             (ds / "meta/info.json").read_text().replace('"total_episodes": 3', '"total_episodes": NaN'))),
+         file="meta/info.json", field="'total_episodes' must be a non-negative number"),
+    Case("info-dataset-five-joint-names",
+         _dataset_cmd("so101_v30", lambda ds: edit_json(ds / "meta/info.json", features={
+             **json.loads((ds / "meta/info.json").read_text())["features"],
+             "action": {"dtype": "float32", "shape": [5], "names": ["a", "b", "c", "d", "e"]}})),
+         file="meta/info.json", field="features.action.names: expected the 6 SO-101 joints"),
+    Case("info-dataset-features-missing",
+         _dataset_cmd("so101_v30", lambda ds: drop_json_key(ds / "meta/info.json", "features")),
+         file="meta/info.json", field="'features' is missing or not an object"),
+    Case("info-dataset-episodes-parquet-truncated",
+         _dataset_cmd("so101_v30", lambda ds: truncate(ds / "meta/episodes/chunk-000/file-000.parquet")),
+         file="meta/episodes/chunk-000/file-000.parquet", field="cannot read parquet"),
+    Case("info-dataset-v21-episodes-bad-line",
+         _dataset_cmd("so101_v21", lambda ds: (ds / "meta/episodes.jsonl").write_text('{"episode_index": 0, "length": "x"}\n')),
+         file="meta/episodes.jsonl", field="line 1: needs integer 'episode_index' and 'length'"),
+    Case("info-dataset-v21-negative-length",
+         _dataset_cmd("so101_v21", lambda ds: (ds / "meta/episodes.jsonl").write_text('{"episode_index": 0, "length": -5}\n')),
+         file="meta/episodes.jsonl", field="line 1: 'episode_index' must be >= 0 and 'length' >= 1"),
+    Case("info-dataset-v21-episodes-not-utf8",
+         _dataset_cmd("so101_v21", lambda ds: (ds / "meta/episodes.jsonl").write_bytes(b"\xff\xfe\x00")),
+         file="meta/episodes.jsonl", field="cannot read"),
+    # ---------------------------------------------------------------- report: the path is unusable
+    Case("report-session-invalid-json", _session_cmd("report", "zs3", lambda s: (s / "session.json").write_text("{")),
+         file="session.json", field="invalid JSON"),
+    Case("report-session-dataset-nul-byte",
+         _session_cmd("report", "zs3", lambda s: edit_json(s / "session.json", gt_source={"dataset": "a\x00b"})),
+         file="session.json", field="gt_source.dataset"),
+    Case("report-session-dataset-not-a-string",
+         _session_cmd("report", "zs1", lambda s: edit_json(s / "session.json", gt_source={"dataset": 5})),
+         file="session.json", field="gt_source.dataset: expected a path string, found 5"),
+    Case("report-empty-session", _session_cmd("report", "zs3", lambda s: shutil.rmtree(s / "rollouts")),
+         file="zs3", field="no rollouts to report"),
+    Case("report-only-rollout-unknown-kind",
+         _session_cmd("report", "zs1", lambda s: edit_json(s / F084 / "rollout.json", kind="multi")),
+         file="f084/rollout.json", field="kind: expected one of"),
+    Case("report-only-rollout-fps-huge-int",
+         _session_cmd("report", "zs1", lambda s: edit_json(s / F084 / "rollout.json", fps=10 ** 400)),
+         file="f084/rollout.json", field="fps: must be a finite number"),
+    Case("report-only-rollout-json-huge-int",
+         _session_cmd("report", "zs1", lambda s: (s / F084 / "rollout.json").write_text(HUGE_INT_JSON)),
+         file="f084/rollout.json", field="invalid JSON"),
+    Case("report-only-rollout-empty-gt-actions",
+         _session_cmd("report", "zs1", _save(F084 + "/gt/actions.npy", np.zeros((0, 6)))),
+         file="f084/gt/actions.npy", field="no GT steps"),
+    Case("report-absurd-1e300", _session_cmd("report", "zs1", lambda s: _scale_actions(s, 1e300)),
+         file="f084/actions.npy", field="absurd value 1e+300 at index [0, 0, 0]"),
+    Case("report-bad-rollout-path", _session_cmd("report", "zs3", lambda s: truncate(s / F084 / "actions.npy"),
+                                                 sub=F084),
+         file="f084/actions.npy", field="not a readable .npy"),
+    Case("report-raw-source-broken-leaves-no-temp", _raw_source_report, file="f084/meta.json",
+         field="actions_gt: shape (3, 6) differs"),
+    Case("report-unknown-user-path", lambda ws, d: ["report", "~nosuchuser_inspector/x"],
+         file="~nosuchuser_inspector/x", field="not found"),
+    Case("report-dataset-option-not-a-dataset", _report_dataset_arg_broken, file="notads/meta/info.json",
+         field="meta/info.json is missing"),
+    # ---------------------------------------------------------------- report: one bad rollout of several
+    Case("report-one-npy-truncated",
+         _session_cmd("report", "zs3", lambda s: truncate(s / F084 / "actions.npy"), "--json"), rc=0,
+         check=_ok_report_rows(["f000", "f169"], "/f084", "f084/actions.npy", "not a readable .npy")),
+    Case("report-one-npy-inf",
+         _session_cmd("report", "zs3", _save(F084 + "/actions.npy", np.full((1, 24, 6), -np.inf)), "--json"), rc=0,
+         check=_ok_report_rows(["f000", "f169"], "/f084", "f084/actions.npy", "non-finite value -inf")),
+    Case("report-one-rollout-missing-kind",
+         _session_cmd("report", "zs3", lambda s: drop_json_key(s / F084 / "rollout.json", "kind"), "--json"), rc=0,
+         check=_ok_report_rows(["f000", "f169"], "/f084", "f084/rollout.json", "missing field 'kind'")),
+    Case("report-one-bad-table-output",
+         _session_cmd("report", "zs3", lambda s: (s / F084 / "actions.npy").write_bytes(b"")), rc=0,
+         check=_check_table_lists_error),
+    Case("report-one-npy-big-endian-float16-is-fine",
+         _session_cmd("report", "zs3", lambda s: np.save(s / F084 / "actions.npy",
+                                                         np.load(s / F084 / "actions.npy").astype(">f2")), "--json"),
+         rc=0, check=_rows(["f000", "f084", "f169"])),
+    Case("report-one-single-chunk-with-two-chunks",
+         _session_cmd("report", "zs3", lambda s: np.save(s / F084 / "actions.npy", np.zeros((2, 24, 6))), "--json"),
+         rc=0, check=_ok_report_rows(["f000", "f169"], "/f084", "f084/actions.npy", "expected 1 chunk, found 2")),
+    Case("report-one-video-corrupt",
+         _session_cmd("report", "zs3", lambda s: corrupt_middle(s / F084 / "video" / "front.mp4"), "--json"), rc=0,
+         check=_ok_report_rows(["f000", "f169"], "/f084", "f084/video/front.mp4", "cannot decode video")),
+    Case("report-one-gt-video-truncated",
+         _session_cmd("report", "zs3", lambda s: truncate(s / F084 / "gt" / "video" / "gripper.mp4"), "--json"), rc=0,
+         check=_ok_report_rows(["f000", "f169"], "/f084", "f084/gt/video/gripper.mp4", "cannot")),
+    Case("report-absurd-1e30-still-reports", _session_cmd("report", "zs1", lambda s: _scale_actions(s, 1e30), "--json"),
+         rc=0, check=_check_absurd_1e30),
+    Case("report-same-session-twice", _same_session_twice, rc=0, check=_rows(["f084", "f084"])),
+    # ---------------------------------------------------------------- report: GT from a dataset
+    Case("report-dataset-episode-beyond",
+         _ds_cmd("report", lambda ws, d, s: edit_json(s / "rollouts/r1/rollout.json", episode_index=7), "--json"), rc=0,
+         check=_ok_report_rows(["r0"], "/r1", "r1/rollout.json", "episode_index 7 not in dataset")),
+    Case("report-dataset-start-frame-beyond",
+         _ds_cmd("report", lambda ws, d, s: edit_json(s / "rollouts/r0/rollout.json", start_frame=500), "--json"), rc=0,
+         check=_ok_report_rows(["r1"], "/r0", "r0/rollout.json", "start_frame 500 lies beyond episode 0 (150 frames)")),
+    Case("report-dataset-gone-means-no-gt",
+         _ds_cmd("report", lambda ws, d, s: edit_json(s / "session.json", gt_source={"dataset": str(d / "gone")}),
+                 "--json"), rc=0, check=_check_no_dataset_gt),
+    Case("report-dataset-data-parquet-truncated", _ds_with_broken_dataset(lambda ds: truncate(ds / V30_DATA)),
+         file=V30_DATA, field="cannot read parquet"),
+    Case("report-dataset-action-nan", _ds_with_broken_dataset(lambda ds: set_parquet_column(ds / V30_DATA, "action", nan_row)),
+         file=V30_DATA, field="action: non-finite value nan in episode 0 at frame_index 5"),
+    Case("report-dataset-action-five-joints",
+         _ds_with_broken_dataset(lambda ds: set_parquet_column(ds / V30_DATA, "action",
+                                                               lambda rows: [r[:5] for r in rows], variable_list=True)),
+         file=V30_DATA, field="action: expected 6 values per row, found 5"),
+    Case("report-dataset-video-corrupt", _ds_with_broken_dataset(lambda ds: corrupt_middle(ds / V30_FRONT, 4000)), rc=0,
+         check=_ok_report_rows(["r0"], "/r1", V30_FRONT, "cannot decode video")),
+    Case("report-rollout-longer-than-episode", _long_rollouts, rc=0, check=_check_long),
+    # ---------------------------------------------------------------- export
+    Case("export-session-invalid-json", _export_cmd("zs1", lambda s: (s / "session.json").write_text("[")),
+         file="session.json", field="invalid JSON"),
+    Case("export-only-rollout-npy-nan", _export_cmd("zs1", _save(F084 + "/actions.npy", np.full((1, 24, 6), np.nan))),
+         file="f084/actions.npy", field="non-finite"),
+    Case("export-video-corrupt", _export_cmd("zs1", lambda s: corrupt_middle(s / F084 / "video" / "front.mp4"),
+                                             "--rollout", "f084"),
+         file="f084/video/front.mp4", field="cannot decode video"),
+    Case("export-empty-session", _export_cmd("zs3", lambda s: _mk_empty(s / "rollouts")),
+         file="zs3", field="no rollouts to export"),
+    Case("export-empty-gt-actions", _export_cmd("zs1", _save(F084 + "/gt/actions.npy", np.zeros((0, 6))),
+                                                "--rollout", "f084"),
+         file="f084/gt/actions.npy", field="no GT steps"),
+    Case("export-absurd-1e300", _export_cmd("zs1", lambda s: _scale_actions(s, 1e300)),
+         file="f084/actions.npy", field="absurd value"),
+    Case("export-one-bad-of-three", _export_cmd("zs3", lambda s: (s / F084 / "rollout.json").write_text("{"), out=""),
+         file="f084/rollout.json", field="invalid JSON", out=("f000.rrd", "f169.rrd")),
+]
+
+
+# ==============================================================================================
+# Running them
+
+
+@pytest.fixture(scope="module")
+def ws(fixtures_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Workspace:
+    return Workspace(tmp_path_factory.mktemp("malformed"), fixtures_dir)
+
+
+def _run_case(case: Case, ws: Workspace) -> Run:
+    d = ws.root / "cases" / case.id
+    (d / "out").mkdir(parents=True)
+    (d / "tmp").mkdir()
+    try:
+        argv = [str(a) for a in case.build(ws, d)]
+    except Exception as exc:  # a broken case, not a finding: report it on its own test
+        return Run(case, d, -1, "", f"case setup failed: {type(exc).__name__}: {exc}")
+    env = {**os.environ, "TMPDIR": str(d / "tmp")}
+    proc = subprocess.run([sys.executable, "-m", "inspector", *argv], capture_output=True, text=True,
+                          timeout=300, env=env, cwd=d, check=False)
+    return Run(case, d, proc.returncode, proc.stdout, proc.stderr)
+
+
+@pytest.fixture(scope="module")
+def runs(ws: Workspace) -> dict[str, Run]:
+    """Every CLI case, run side by side (the machine's cores are mostly idle while each starts)."""
+    with ThreadPoolExecutor(max_workers=6) as pool:
+        return dict(zip([c.id for c in CASES], pool.map(lambda c: _run_case(c, ws), CASES)))
+
+
+def test_cases_are_many_and_distinct():
+    ids = [c.id for c in CASES]
+    assert len(ids) == len(set(ids)) and len(ids) >= 40
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
+def test_cli_malformed(case: Case, runs: dict[str, Run]) -> None:
+    run = runs[case.id]
+    assert run.rc != -1, run.stderr
+    assert "Traceback" not in run.stdout + run.stderr, run.stderr
+    assert run.rc == case.rc, f"exit {run.rc}, expected {case.rc}; stderr: {run.stderr!r}"
+    if case.rc == 2:
+        lines = run.stderr.splitlines()
+        assert len(lines) == 1 and run.stderr.endswith("\n"), run.stderr
+        prefix, file, what = (lines[0].split(": ", 2) + ["", ""])[:3]
+        assert prefix == "error", lines[0]
+        assert case.file is not None and case.file in file, f"{case.file!r} not in file part of {lines[0]!r}"
+        assert case.field is not None and case.field in what, f"{case.field!r} not in {lines[0]!r}"
+    else:
+        assert run.stderr == "", run.stderr  # no warnings either
+    # nothing half-written: the output directory holds exactly what succeeded
+    assert sorted(p.name for p in (run.dir / "out").iterdir()) == sorted(case.out)
+    for rrd in (run.dir / "out").glob("*.rrd"):
+        assert rrd.stat().st_size > 0
+    assert list((run.dir / "tmp").iterdir()) == [], "temporary files left behind"
+    if case.check is not None:
+        case.check(run)
+
+
+# ==============================================================================================
+# The writer API (what evaluation scripts call): duplicate tags, bad arrays, nothing half-written
+
+
+@pytest.mark.parametrize("second, message", [
+    (dict(actions=np.zeros((2, 24, 6))), "rollout 'a' already exists"),  # a duplicate tag
+    (dict(actions=np.zeros((2, 24, 5))), "shape: expected (n_chunks, 24, 6), found (2, 24, 5)"),
+    (dict(actions=np.full((2, 24, 6), 1e200)), "absurd value 1e+200"),
+    (dict(actions=np.zeros((2, 24, 6)), gt_actions=np.zeros((0, 6))), "no GT steps"),
+    (dict(actions=np.zeros((2, 24, 6)), episode_index=-1), "episode_index: must be >= 0"),
+], ids=["duplicate-tag", "joint-count", "absurd", "empty-gt", "negative-episode"])
+def test_writer_refuses_and_leaves_nothing(tmp_path: Path, second: dict[str, Any], message: str) -> None:
+    dest = tmp_path / "s"
+    with pytest.raises(InspectorError) as err:
+        with SessionWriter.create(dest) as w:
+            w.add_rollout("a", kind="autoregressive", actions=np.zeros((2, 24, 6)))
+            w.add_rollout("b" if "already" not in message else "a", kind="autoregressive", **second)
+    assert message in str(err.value) and "\n" not in str(err.value)
+    assert ".partial" not in err.value.file  # named where it would have been, not in a temp dir
+    assert list(tmp_path.iterdir()) == []
+
+
+# ==============================================================================================
+# The app: a broken rollout is an error entry; Catalog.load raises only InspectorError
+
+
+def test_app_catalog_broken_rollouts_are_errors(ws: Workspace, tmp_path: Path) -> None:
+    catalog_module = pytest.importorskip("inspector.app._catalog")
+    from inspector.app._frames import READY
+    from inspector.app._robot import joint_child_links
+    from inspector.sources import open_sources
+
+    zs3 = ws.session(tmp_path / "a", "zs3")
+    np.save(zs3 / F084 / "actions.npy", np.full((1, 24, 6), np.nan))  # fails on open
+    edit_json(zs3 / "rollouts/f169/rollout.json", views=["front", "front"])  # fails on open
+    ds = ws.ds_session(tmp_path / "b")
+    edit_json(ds / "rollouts/r0/rollout.json", start_frame=500)  # fails when its timeline is built
+    edit_json(ds / "rollouts/r1/rollout.json", episode_index=9)  # likewise
+    zs1 = ws.session(tmp_path / "c", "zs1")
+    corrupt_middle(zs1 / F084 / "video" / "front.mp4")  # loads; its view shows an error
+    empty = ws.session(tmp_path / "d", "zs3")
+    _mk_empty(empty / "rollouts")
+    edit_json(empty / "session.json", name="empty")
+
+    sources = open_sources([zs3, ds, zs1, empty])
+    try:
+        with ThreadPoolExecutor(2) as pool:
+            catalog = catalog_module.Catalog(sources, pool, joint_child_links())
+            assert sorted(catalog.keys()) == ["ds / r0", "ds / r1", "zs1 / f084", "zs3 / f000",
+                                              "zs3 / f084", "zs3 / f169"]
+            failed: dict[str, str] = {}
+            for key in catalog.entries:
+                try:
+                    catalog.load(key)
+                except InspectorError as exc:  # anything else would escape and fail the test
+                    failed[key] = str(exc)
+            assert sorted(failed) == ["ds / r0", "ds / r1", "zs3 / f084", "zs3 / f169"]
+            assert "f084/actions.npy" in failed["zs3 / f084"] and "non-finite" in failed["zs3 / f084"]
+            assert "views: listed twice" in failed["zs3 / f169"]
+            assert "start_frame 500" in failed["ds / r0"] and "episode_index 9" in failed["ds / r1"]
+            assert all("\n" not in m for m in failed.values())
+            # a failed build is retried on the next open, and fails the same clean way
+            with pytest.raises(InspectorError):
+                catalog.load("ds / r0")
+            # the corrupt video fails alone: the rollout opens, that view carries the error
+            loaded = catalog.load("zs1 / f084")
+            assert loaded.frames.done.wait(60)
+            assert "front.mp4" in loaded.frames.status["front"] and "\n" not in loaded.frames.status["front"]
+            assert loaded.frames.status["gripper"] == READY and loaded.frames.status["top"] == READY
+            assert catalog.load("zs3 / f000").timeline.has_gt_joints
+    finally:
+        sources.close()
+
+
+# ==============================================================================================
+# Hypothesis: the session reader takes anything and answers with a session or an InspectorError
+
+_SESSION = {"schema": SCHEMA, "name": "p", "robot": "so101", "units": {"arm": "degrees", "gripper": "0..100"},
+            "joint_names": list(JOINT_NAMES), "gt_source": {}, "model": {}}
+_ROLLOUT = {"kind": "autoregressive", "prompt": "", "episode_index": None, "start_frame": 0, "fps": 30.0,
+            "horizon": 4, "executed_per_chunk": 2, "frames_per_chunk": 2, "views": [],
+            "gt": {"views": [], "episode_length": None}}
+
+_json_scalars = (st.none() | st.booleans() | st.integers() | st.integers(-(10 ** 400), 10 ** 400)
+                 | st.floats(allow_nan=True, allow_infinity=True) | st.text(max_size=8)
+                 | st.sampled_from(["", ".", "/", "~", "~nosuchuser/x", "a\x00b", "degrees", "range100",
+                                    "so101", "single_chunk", "autoregressive", "front", "../x", SCHEMA]))
+_json_values = st.recursive(_json_scalars, lambda inner: st.lists(inner, max_size=3)
+                            | st.dictionaries(st.text(max_size=6), inner, max_size=3), max_leaves=8)
+
+
+def _json_file(base: dict[str, Any], special: dict[str, st.SearchStrategy]) -> st.SearchStrategy[bytes]:
+    """Bytes of a JSON file, mostly near ``base`` so that the reader gets past its first checks:
+    ``base`` itself, fields set to plausible (``special``) or arbitrary values or dropped, any JSON
+    document, or any bytes."""
+    keys = sorted(set(base) | set(special) | {"unknown"})
+    dump = lambda fields, dropped: json.dumps({k: v for k, v in {**base, **fields}.items()
+                                               if k not in dropped}).encode()
+    plausible = st.lists(st.sampled_from(sorted(special)), max_size=3, unique=True).flatmap(
+        lambda ks: st.fixed_dictionaries({k: special[k] for k in ks})).map(lambda f: dump(f, ()))
+    arbitrary = st.tuples(
+        st.lists(st.sampled_from(keys), min_size=1, max_size=3, unique=True).flatmap(
+            lambda ks: st.fixed_dictionaries({k: _json_values for k in ks})),
+        st.sets(st.sampled_from(sorted(base)), max_size=2),
+    ).map(lambda ed: dump(*ed))
+    garbage = st.one_of(
+        _json_values.map(lambda v: json.dumps(v).encode()),
+        st.binary(max_size=40),
+        st.sampled_from([DEEP_JSON.encode(), HUGE_INT_JSON.encode(), b"", b"\xff\xfe", b"[]", b"null"]),
+    )
+    return st.one_of(st.just(dump({}, ())), plausible, plausible, plausible, arbitrary, garbage)
+
+
+_ints = st.integers(0, 6) | st.sampled_from([10 ** 6, 10 ** 13, 2 ** 62])
+_DESCRS = ["<f8", ">f8", "<f4", "<f2", "<i8", "|u1", "|b1", "<c16", "<U3", "|O", "<M8[s]", "|V8", "zz", "<f16"]
+
+
+def _npy_file(shapes: list[tuple[int, ...]]) -> st.SearchStrategy[bytes]:
+    """Bytes of a ``.npy``: real arrays of plausible shape and any dtype/values, or made-up headers."""
+    import io
+
+    def save(shape: tuple[int, ...], dtype: str, value: float, slope: float) -> bytes:
+        with np.errstate(all="ignore"):  # NaN or 1e308 cast to int: whatever numpy makes of it
+            ramp = np.arange(int(np.prod(shape))).reshape(shape) * 0.01 * slope
+            arr = (np.full(shape, value) + ramp).astype(dtype)
+        buf = io.BytesIO()
+        np.save(buf, arr)
+        return buf.getvalue()
+
+    values = st.one_of(
+        st.floats(-1e3, 1e3),
+        st.floats(allow_nan=True, allow_infinity=True),
+        st.sampled_from([0.0, 1e30, -1e99, 1e101, 1.7e308, 5e-324]),
+    )
+    real = st.tuples(st.sampled_from(shapes) | st.lists(st.integers(0, 5), max_size=4).map(tuple),
+                     st.sampled_from(["<f8", ">f8", "<f4", "<f2", "<i4", "|u1", "|b1", "<c16"]),
+                     values, st.floats(-200, 200)).map(lambda t: save(*t))
+    made_up = st.builds(npy_bytes, st.sampled_from(_DESCRS), st.lists(_ints, max_size=4).map(tuple),
+                        st.binary(max_size=300), st.booleans())
+    plausible = st.tuples(st.sampled_from(shapes), st.just("<f8"), st.floats(-1e3, 1e3),
+                          st.floats(-200, 200)).map(lambda t: save(*t))
+    return st.one_of(plausible, plausible, plausible, real, real, made_up, st.binary(max_size=100))
+
+
+def _write_session(root: Path, session_json: bytes, rollout_json: bytes, actions: bytes,
+                   gt_actions: bytes | None = None, states: bytes | None = None, twin: bool = False) -> Path:
+    """A session with rollout ``r`` made of the given bytes (and a valid rollout ``twin``)."""
+    r = root / "rollouts" / "r"
+    (r / "gt").mkdir(parents=True)
+    (root / "session.json").write_bytes(session_json)
+    (r / "rollout.json").write_bytes(rollout_json)
+    (r / "actions.npy").write_bytes(actions)
+    if gt_actions is not None:
+        (r / "gt" / "actions.npy").write_bytes(gt_actions)
+    if states is not None:
+        (r / "states.npy").write_bytes(states)
+    if twin:
+        (root / "rollouts" / "twin").mkdir()
+        (root / "rollouts" / "twin" / "rollout.json").write_text(json.dumps(_ROLLOUT))
+        np.save(root / "rollouts" / "twin" / "actions.npy", np.zeros((2, 4, 6)))
+    return r
+
+
+def _report_row_or_clean_error(rollout: Any) -> None:
+    """The rollout's timeline and report row build, or fail with a one-line InspectorError."""
+    from inspector.report import rollout_summary
+    from inspector.timeline import build_timeline
+
+    try:
+        row = rollout_summary(build_timeline(rollout))
+    except InspectorError as exc:
+        assert "\n" not in str(exc)
+        event("timeline refused")
+        return
+    event("report row")
+    assert row["tag"] == rollout.tag
+    json.dumps(row)  # the report's JSON can always be written
+
+
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@given(session_json=_json_file(_SESSION, {
+    "schema": st.sampled_from([SCHEMA, "inspector.session/2"]),
+    "units": st.fixed_dictionaries({"arm": st.sampled_from(["degrees", "range100", "rad"])}),
+    "joint_names": st.permutations(list(JOINT_NAMES)),
+    "gt_source": st.fixed_dictionaries({"dataset": _json_scalars})}))
+def test_session_json_property(session_json: bytes) -> None:
+    """Any ``session.json``: the session opens (its valid rollout loads) or ``open_session`` raises
+    an InspectorError naming session.json in one line; never another exception."""
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp) / "s"
+        _write_session(root, session_json, json.dumps({**_ROLLOUT, "episode_index": 0}).encode(),
+                       npy_bytes("<f8", (2, 4, 6), bytes(2 * 4 * 6 * 8)))
+        try:
+            session = open_session(root)
+        except InspectorError as exc:
+            assert str(root / "session.json") in str(exc) and "\n" not in str(exc)
+            event("session refused")
+            return
+        assert list(session.rollouts) == ["r"] and not session.errors
+        _report_row_or_clean_error(session.rollouts["r"])
+
+
+def _array_bytes(shape: tuple[int, ...], values: st.SearchStrategy[float]) -> st.SearchStrategy[bytes]:
+    import io
+
+    def save(arr: np.ndarray) -> bytes:
+        buf = io.BytesIO()
+        np.save(buf, arr)
+        return buf.getvalue()
+
+    n = int(np.prod(shape))
+    return st.lists(values, min_size=n, max_size=n).map(lambda v: save(np.array(v, np.float64).reshape(shape)))
+
+
+_V30 = Path(__file__).resolve().parents[2] / "shared" / "fixtures" / "lerobot" / "so101_v30"  # as conftest.py
+_joint_values = st.floats(-300, 300) | st.sampled_from([0.0, 1e30, -1e99, 1e100])
+# A valid rollout of 2 autoregressive chunks of horizon 4, in all the ways a valid one may vary.
+_VALID_ROLLOUT = st.fixed_dictionaries({
+    **{k: st.just(v) for k, v in _ROLLOUT.items()},
+    "executed_per_chunk": st.integers(1, 4), "frames_per_chunk": st.integers(1, 3),
+    "start_frame": st.integers(0, 200), "episode_index": st.none() | st.integers(0, 3),
+    "fps": st.floats(0.5, 1000), "gt": st.fixed_dictionaries({"episode_length": st.none() | st.integers(1, 400)}),
+}).map(lambda d: json.dumps(d).encode())
+_VALID_NPY = {
+    "actions": _array_bytes((2, 4, 6), _joint_values),
+    "gt": st.integers(1, 40).flatmap(lambda t: _array_bytes((t, 6), _joint_values)),
+    "states": _array_bytes((3, 6), _joint_values),
+}
+_FUZZ = {
+    "rollout.json": _json_file(_ROLLOUT, {
+        "kind": st.sampled_from(["single_chunk", "autoregressive", "multi"]),
+        "horizon": st.integers(-1, 6), "executed_per_chunk": st.integers(-1, 6),
+        "frames_per_chunk": st.integers(-1, 3), "start_frame": st.integers(-1, 200) | st.just(10 ** 30),
+        "episode_index": st.integers(-2, 3), "views": st.lists(st.sampled_from(["front", "top", "a b"]), max_size=2),
+        "fps": st.floats(allow_nan=True, allow_infinity=True) | st.integers(-1, 10 ** 400),
+        "gt": st.fixed_dictionaries({"episode_length": st.none() | st.integers(-1, 400) | st.booleans()})}),
+    "actions": _npy_file([(1, 4, 6), (3, 4, 6), (0, 4, 6), (2, 4, 5), (2, 3, 6)]),
+    "gt": _npy_file([(8, 6), (1, 6), (0, 6), (8, 5), (8,)]),
+    "states": _npy_file([(2, 6), (4, 6), (3, 5)]),
+}
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@given(broken=st.sampled_from(["nothing", *_FUZZ]), data=st.data(), twin=st.booleans(), with_dataset=st.booleans())
+def test_rollout_property(broken: str, data: st.DataObject, twin: bool, with_dataset: bool) -> None:
+    """A valid-but-varied rollout with one of its files (``rollout.json``, ``actions.npy``,
+    ``gt/actions.npy``, ``states.npy``) replaced by arbitrary bytes, with or without a GT dataset:
+    the rollout loads or is recorded as an InspectorError naming its file in one line (the other
+    rollout still loads); a loaded rollout's timeline and report row build or fail with
+    InspectorError; never another exception."""
+    files = {"rollout.json": data.draw(_VALID_ROLLOUT, "rollout.json"), "actions": data.draw(_VALID_NPY["actions"], "actions"),
+             "gt": data.draw(st.none() | _VALID_NPY["gt"], "gt"),
+             "states": data.draw(st.none() | _VALID_NPY["states"], "states")}
+    if broken != "nothing":
+        files[broken] = data.draw(_FUZZ[broken], f"broken {broken}")
+    # without the shared fixtures the named dataset is simply missing: no dataset GT, still a valid case
+    gt_source = {"dataset": str(_V30)} if with_dataset else {}
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp) / "s"
+        r = _write_session(root, json.dumps({**_SESSION, "gt_source": gt_source}).encode(), files["rollout.json"],
+                           files["actions"], files["gt"], files["states"], twin)
+        session = open_session(root)
+        assert session.tags() == (["r", "twin"] if twin else ["r"])
+        assert not (set(session.rollouts) & set(session.errors))
+        assert not twin or "twin" in session.rollouts  # one bad rollout never takes the others down
+        if "r" in session.errors:
+            message = str(session.errors["r"])
+            assert str(r) in message and "\n" not in message
+            event(f"rollout refused ({broken})")
+            return
+        rollout = session.rollouts["r"]
+        assert rollout.actions.dtype == np.float64 and np.isfinite(rollout.actions).all()
+        _report_row_or_clean_error(rollout)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(meta=_json_file({"tag": "x", "episode": 0, "frame_in_ep": 3, "prompt": "p", "episode_length": 30,
+                        "predicted_frames": 9, "actions_pred": [[1.0] * 6] * 24, "actions_gt": [[2.0] * 6] * 24},
+                       {"actions_pred": st.lists(st.lists(st.floats(allow_nan=True) | st.integers(), min_size=5,
+                                                          max_size=6), min_size=0, max_size=3),
+                        "episode_length": st.none() | st.integers(-2, 40) | st.booleans(),
+                        "frame_in_ep": st.integers(-1, 10 ** 20), "predicted_frames": st.integers(-1, 3)}))
+def test_importer_property_all_or_nothing(meta: bytes) -> None:
+    """Any single-chunk ``meta.json``: the import succeeds, or fails with InspectorError and
+    leaves nothing next to the destination."""
+    from inspector.importers.dreamzero_so101 import import_dreamzero
+
+    with tempfile.TemporaryDirectory() as tmp:
+        src = Path(tmp) / "src" / "f003"
+        src.mkdir(parents=True)
+        (src / "meta.json").write_bytes(meta)
+        out = Path(tmp) / "out"
+        out.mkdir()
+        try:
+            dest = import_dreamzero(src, out / "s", log=lambda _: None)
+        except InspectorError as exc:
+            assert "\n" not in str(exc) and str(src) in str(exc)
+            assert list(out.iterdir()) == []
+            event("import refused")
+            return
+        event("imported")
+        session = open_session(dest)
+        assert list(session.rollouts) == ["f003"] and not session.errors
+        assert sorted(p.name for p in out.iterdir()) == ["s"]
