@@ -89,6 +89,8 @@ def resolve_ground_truth(rollout: Rollout, dataset_root: Path | None = None) -> 
         length, source = episode.length, f"dataset {root} episode {rollout.episode_index}"
     else:
         actions, offset, source = None, 0, "none"
+        if root is not None and not Path(root).exists():
+            source = f"none (dataset {root} not found)"  # named but gone: say so, don't hide it
         length = rollout.gt_episode_length
         length = None if length is None else length - rollout.start_frame
         offset = 0

@@ -76,6 +76,8 @@ def time_aligned(pred: npt.ArrayLike, gt: npt.ArrayLike, offset: int = 0) -> tup
     """
     pred = np.asarray(pred, np.float64)
     gt = np.asarray(gt, np.float64)
+    if len(gt) == 0:
+        raise ValueError("time_aligned: the GT episode is empty")
     t = offset + np.arange(pred.shape[-2])
     idx = np.minimum(t, gt.shape[0] - 1)
     gt_aligned = gt[idx]
@@ -114,7 +116,10 @@ def best_match(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, npt.NDArr
 
     p = np.asarray(pred, np.float64)
     g = np.asarray(gt, np.float64)
+    if len(g) == 0:
+        raise ValueError("best_match: the GT episode is empty")
     drift, nearest = cKDTree(g).query(p.reshape(-1, g.shape[1]), k=1, workers=-1)
+    nearest = np.minimum(nearest, len(g) - 1)  # the tree answers len(g) for an infinite distance
     # A GT hold (the arm at rest) repeats one pose over many frames, and every frame of it ties;
     # an arbitrary one of them would bias the tempo fit, so each match moves to the middle of its run.
     index = _middle_of_identical_runs(g)[nearest]

@@ -307,7 +307,9 @@ def _check_absurd_1e30(run: Run) -> None:
 
 def _check_no_dataset_gt(run: Run) -> None:
     rows = run.json()["rollouts"]
-    assert [r["gt_source"] for r in rows] == ["none", "none"] and all(r["rmse_deg"] is None for r in rows)
+    # the session names a dataset that is gone: no GT joints, and the report says why
+    assert all(r["gt_source"].startswith("none (dataset ") and r["gt_source"].endswith(" not found)") for r in rows)
+    assert len(rows) == 2 and all(r["rmse_deg"] is None for r in rows)
 
 
 def _check_dest_untouched(run: Run) -> None:
