@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import shutil
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = [
@@ -63,6 +63,12 @@ def slider_thumb(page, label):
     """The thumb of the viser slider labelled ``label`` (text or regex; found via its <label for=...>)."""
     target = page.locator("label", has_text=label).first.get_attribute("for")
     return page.locator(f"[id='{target}'] [role=slider]").first
+
+
+def page_client_id(page) -> int | None:
+    """The viser client id of the page's current connection (a reconnect gets a new one)."""
+    value = page.evaluate("() => document.querySelector('[data-inspector-client]')?.dataset.inspectorClient")
+    return None if value is None else int(value)
 
 
 def frame_sources(page) -> dict[str, str]:

@@ -234,7 +234,8 @@ def test_notes_from_two_tabs_both_survive(app, sessions):
         t2.set_chunk(9)
         results = []
         threads = [threading.Thread(target=lambda t=t, n=n: results.append(
-            t.save_notes(rollout_flag=True, chunk_flag=True, chunk_note=n))) for t, n in ((t1, "tab one"), (t2, "tab two"))]
+            t.save_notes(rollout_flag=True, chunk_flag=True, chunk_note=n)))
+            for t, n in ((t1, "tab one"), (t2, "tab two"))]
         for th in threads:
             th.start()
         for th in threads:
@@ -244,6 +245,24 @@ def test_notes_from_two_tabs_both_survive(app, sessions):
         chunks = data["rollouts"]["ep000_train"]["chunks"]
         assert chunks["4"] == {"flag": True, "note": "tab one"}
         assert chunks["9"] == {"flag": True, "note": "tab two"}
+
+
+def test_export_sends_the_recording(app):
+    pytest.importorskip("inspector.export")
+    client, tab = connect(app)
+    with client:
+        assert tab.open(key(app, "f084"))
+        before = client.received_bytes
+        thread = tab.export()
+        thread.join(120)
+        assert tab.export_result is not None and tab.export_result.startswith("sent"), tab.export_result
+        size = int(tab.export_result.split()[1])
+        assert size > 100_000
+        # The file went to this client (messages are zstd-compressed on the wire: compare loosely).
+        deadline = time.monotonic() + 10
+        while client.received_bytes - before < size // 4 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert client.received_bytes - before >= size // 4
 
 
 def test_annotations_concurrent_writers(tmp_path):

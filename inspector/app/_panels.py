@@ -1,0 +1,213 @@
+"""The GUI of one tab: the left control panel, and the right panel (video above plots).
+
+These classes only create and hold handles (and turn a timeline into plot series); what happens
+when a control changes is wired in :mod:`._state`. Layout: the control panel docks left, the
+video and plots dock right; the 3D scene fills the middle.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..metrics import prompt_divergence
+from ..timeline import RolloutTimeline
+from ..units import JOINT_NAMES
+from ._cards import unit
+from ._plots import CursorPlot, Line
+
+SPEEDS = ("0.25x", "0.5x", "1x", "2x", "4x")
+NO_COMPARE = "— none —"
+PRED_HEX, GT_HEX, CMP_HEX = "#f08c00", "#2b8a3e", "#1c7ed6"
+BM_HEX, DTW_HEX, LIMIT_HEX = "#7048e8", "#868e96", "#e03131"
+
+
+class ControlPanel:
+    """Left panel: picker, rollout card, timeline controls, compare, notes, export."""
+
+    def __init__(self, gui, keys: Sequence[str], error_keys: set[str], client_id: int = 0) -> None:
+        # Picker labels mark rollouts that failed to load; they map back to catalog keys only.
+        self.option_to_key = {(f"{k} ⚠" if k in error_keys else k): k for k in keys}
+        self.key_to_option = {v: k for k, v in self.option_to_key.items()}
+        options = list(self.option_to_key) or ["(no rollouts)"]
+        # data-inspector-client lets a test find the server-side tab of a page.
+        gui.add_html(f"<div data-inspector-client='{int(client_id)}' style='font-weight:600;"
+                     "font-size:0.95rem;padding:0 0.2rem'>SO-101 rollout inspector</div>")
+        self.picker = gui.add_dropdown("Rollout", options, initial_value=options[0],
+                                       hint="Sessions and rollouts under the served paths")
+        self.error = gui.add_html("", visible=False)
+        self.card = gui.add_html("")
+        with gui.add_folder("Timeline"):
+            self.chunk = gui.add_slider("Chunk", 0, 1, 1, 0, hint="Predicted chunk (PageUp/PageDown)")
+            self.step_in_chunk = gui.add_slider("Step in chunk", 0, 1, 1, 0,
+                                                hint="Executed step within the chunk (J / L)")
+            self.readout = gui.add_html("")
+            self.play = gui.add_button("Play", icon="player-play", hint="Play / pause (K)")
+            self.speed = gui.add_dropdown("Speed", SPEEDS, initial_value="1x")
+            self.nav = gui.add_button_group("Go to chunk", ("◀ prev", "next ▶", "worst"))
+        with gui.add_folder("Compare", expand_by_default=False):
+            self.compare = gui.add_dropdown("Compare with", [NO_COMPARE, *keys], initial_value=NO_COMPARE,
+                                            hint="Second rollout on the same timeline (e.g. novel prompt)")
+            self.compare_info = gui.add_html("")
+        with gui.add_folder("Notes", expand_by_default=False):
+            self.flag_rollout = gui.add_checkbox("Flag rollout", False)
+            self.note_rollout = gui.add_text("Rollout note", "", multiline=True)
+            self.flag_chunk = gui.add_checkbox("Flag this chunk", False)
+            self.note_chunk = gui.add_text("Chunk note", "", multiline=True)
+            self.save_notes = gui.add_button("Save notes", icon="device-floppy")
+            self.notes_info = gui.add_html("")
+        self.export = gui.add_button("Export .rrd", icon="download",
+                                     hint="Download a Rerun recording of this rollout")
+
+    def key_of(self, option: str) -> str | None:
+        return self.option_to_key.get(option)
+
+
+class VideoPanel:
+    """Imagined frame above the GT frame at the same time, one column per view."""
+
+    def __init__(self, gui) -> None:
+        self.html = gui.add_html("<div>loading…</div>")
+
+
+class PlotPanel:
+    """Plots under the video (tabs: drift, joints, end effector & video), rebuilt per rollout."""
+
+    def __init__(self, gui) -> None:
+        self._gui = gui
+        tabs = gui.add_tab_group()
+        self.tab_drift = tabs.add_tab("Drift", icon="chart-line")
+        self.tab_joints = tabs.add_tab("Joints", icon="adjustments")
+        self.tab_ee = tabs.add_tab("EE & video", icon="chart-dots")
+        with self.tab_joints:
+            self.joint = gui.add_dropdown("Joint", JOINT_NAMES, initial_value="shoulder_lift", order=0)
+        self.plots: list[CursorPlot] = []
+        self._handles: list = []
+        self.joint_plot: CursorPlot | None = None
+        self.psnr_plot: CursorPlot | None = None
+        self._tl: RolloutTimeline | None = None
+        self._cmp: RolloutTimeline | None = None
+        self._psnr_views: tuple[str, ...] = ()
+
+    def clear(self) -> None:
+        for h in self._handles:
+            h.remove()
+        for p in self.plots:
+            p.handle.remove()
+        self._handles, self.plots = [], []
+        self.joint_plot = self.psnr_plot = None
+        self._tl = None
+
+    def build(self, tl: RolloutTimeline, compare: RolloutTimeline | None,
+              psnr: dict[str, np.ndarray | None]) -> None:
+        """(Re)create every plot for ``tl`` (and the compared rollout, if any)."""
+        self.clear()
+        self._tl, self._cmp = tl, compare
+        gui, t, u = self._gui, tl.t_s, unit(tl)
+        ticks = tl.t_s[tl.chunk_start_step[tl.chunk_start_step < tl.n_steps]]
+        end = float(tl.episode_end_step / tl.fps) if tl.episode_end_step is not None else None
+        common = {"ticks": ticks, "end": end}
+        with self.tab_drift:
+            if tl.has_gt_joints:
+                per_chunk = tl.per_chunk(tl.time_aligned_drift)[tl.step_chunk]
+                self._add(CursorPlot(gui, f"Joint drift [{u.strip() or 'units'}], L2 over 6 joints", t, [
+                    Line("time-aligned", tl.time_aligned_drift, LIMIT_HEX, 1.6),
+                    Line("best-match", tl.best_match_drift, BM_HEX, 1.4),
+                    Line("time-aligned, chunk mean", per_chunk, LIMIT_HEX, 1.0, (4, 3)),
+                    *([Line("DTW", tl.dtw_drift, DTW_HEX, 1.0, (2, 2))] if tl.dtw_drift is not None else []),
+                ], floor=0.0, **common))
+            else:
+                self._handles.append(gui.add_html(
+                    "<div style='font-size:0.8rem;color:#6b7280;padding:4px'>No GT joints for this "
+                    "rollout, so no joint drift. Serve it with <code>--dataset</code> pointing at its "
+                    "LeRobot dataset to compare joints. Shown: joints over their limits per step.</div>"))
+                self._add(CursorPlot(gui, "Joints past their URDF limit (count)", t, [
+                    Line("joints over limit", tl.limit_violation.sum(axis=1).astype(float), LIMIT_HEX)],
+                    floor=0.0, **common))
+            if compare is not None:
+                per_step, per_chunk_div, collapse = prompt_divergence(tl.pred, compare.pred, tl.steps_per_chunk)
+                n = len(per_step)
+                div = np.full(tl.n_steps, np.nan)
+                div[:n] = per_step
+                div_chunk = np.full(tl.n_steps, np.nan)
+                div_chunk[:n] = per_chunk_div[tl.step_chunk[:n]]
+                meet = f", together again from chunk {collapse}" if collapse is not None else ""
+                self._add(CursorPlot(gui, f"Divergence from {compare.tag} [{u.strip() or 'units'}]{meet}", t, [
+                    Line("per step", div, CMP_HEX, 1.5),
+                    Line("chunk mean", div_chunk, CMP_HEX, 1.0, (4, 3)),
+                ], floor=0.0, **common))
+        with self.tab_joints:
+            self.joint_plot = self._add(CursorPlot(gui, "", t, self._joint_lines(self.joint.value), **common))
+            self.joint_plot.set_lines(self._joint_lines(self.joint.value), title=self._joint_title())
+        with self.tab_ee:
+            if tl.ee_error_mm is not None:
+                self._add(CursorPlot(gui, "End-effector error [mm]", t, [
+                    Line("|pred − GT| at gripper frame", tl.ee_error_mm, PRED_HEX)], floor=0.0, **common))
+            self.psnr_plot = self._add(CursorPlot(gui, "Video PSNR, imagined vs GT [dB]", *self._psnr_xy(psnr),
+                                                  **common))
+
+    def _add(self, plot: CursorPlot) -> CursorPlot:
+        self.plots.append(plot)
+        return plot
+
+    def set_cursor(self, t: float) -> None:
+        for p in self.plots:
+            p.set_cursor(t)
+
+    # -- series -------------------------------------------------------------------------------
+    def _joint_title(self) -> str:
+        tl = self._tl
+        j = self.joint.value
+        u = "0..100" if j == "gripper" else ("deg" if tl is None or tl.units.arm == "degrees" else "-100..100")
+        return f"{j} [{u}]: predicted vs GT, limits dashed"
+
+    def _joint_lines(self, joint: str) -> list[Line]:
+        tl = self._tl
+        assert tl is not None
+        j = JOINT_NAMES.index(joint)
+        lines = [Line("predicted", tl.pred[:, j], PRED_HEX, 1.6)]
+        if tl.gt_aligned is not None:
+            lines.append(Line("GT", tl.gt_aligned[:, j], GT_HEX, 1.6))
+        if self._cmp is not None:
+            y = np.full(tl.n_steps, np.nan)
+            n = min(tl.n_steps, self._cmp.n_steps)
+            y[:n] = self._cmp.pred[:n, j]
+            lines.append(Line(f"{self._cmp.tag}", y, CMP_HEX, 1.2))
+        lo, hi = tl.limits[j]
+        lines += [Line("lower limit", np.full(tl.n_steps, lo), LIMIT_HEX, 1.0, (5, 4)),
+                  Line("upper limit", np.full(tl.n_steps, hi), LIMIT_HEX, 1.0, (5, 4))]
+        return lines
+
+    def show_joint(self, joint: str) -> None:
+        if self.joint_plot is not None and self._tl is not None:
+            self.joint_plot.set_lines(self._joint_lines(joint), title=self._joint_title())
+
+    def _psnr_xy(self, psnr: dict[str, np.ndarray | None]) -> tuple[np.ndarray, list[Line]]:
+        """PSNR per imagined frame, placed at the time of the step each frame shows."""
+        tl = self._tl
+        assert tl is not None
+        colors = ("#e8590c", "#1c7ed6", "#2b8a3e", "#ae3ec9")
+        series = {v: p for v, p in psnr.items() if p is not None}
+        self._psnr_views = tuple(series)
+        if not series:
+            return tl.t_s, [Line("computing… / no GT video", np.full(tl.n_steps, np.nan), "#adb5bd")]
+        n = max(len(p) for p in series.values())
+        x = tl.frame_step(n) / tl.fps
+        # Several frames can show one step (single chunks): keep x ascending by a tiny offset.
+        x = x + np.arange(n) * 1e-6
+        lines = []
+        for i, (v, p) in enumerate(series.items()):
+            y = np.full(n, np.nan)
+            y[: len(p)] = p
+            lines.append(Line(v, y, colors[i % len(colors)], 1.4))
+        return x, lines
+
+    def update_psnr(self, psnr: dict[str, np.ndarray | None]) -> None:
+        """Redraw the PSNR plot once more views have their PSNR."""
+        if self.psnr_plot is None or self._tl is None:
+            return
+        if tuple(v for v, p in psnr.items() if p is not None) == self._psnr_views:
+            return
+        x, lines = self._psnr_xy(psnr)
+        self.psnr_plot.set_lines(lines, x=x)

@@ -1,0 +1,242 @@
+"""The 3D scene of one tab: GT and predicted arms, end-effector paths, the chunk's horizon trail.
+
+What is drawn (all in the robot base frame, metres):
+
+- the GT arm (opaque grey) and the predicted arm (translucent orange), both from the one shared
+  URDF, posed per step with ``update_cfg``; a compared rollout's arm in translucent blue;
+- the GT and predicted end-effector (gripper frame) paths as lines;
+- the current chunk's whole predicted horizon (24 steps) as a trail: the executed steps thick and
+  dark, the rest thin; horizon steps past a joint limit as red points;
+- a red sphere and label at each joint that is past its limit at the current step.
+
+:class:`RolloutScene` holds the per-rollout arrays (computed once, shared by all tabs);
+:class:`TabScene` holds one client's scene nodes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from ..kinematics import kinematics
+from ..timeline import RolloutTimeline
+from ..units import JOINT_NAMES, to_radians
+from ._robot import ArmView, SharedRobot
+
+Array = npt.NDArray[np.float64]
+
+GT_COLOR = (0.62, 0.64, 0.68)  # opaque grey: the real arm
+PRED_COLOR = (1.0, 0.45, 0.05, 0.55)  # translucent orange: the model's arm
+CMP_COLOR = (0.15, 0.45, 1.0, 0.45)  # translucent blue: the compared rollout
+PRED_RGB = (240, 110, 10)
+GT_RGB = (40, 160, 70)
+CMP_RGB = (40, 110, 240)
+EXECUTED_RGB = (200, 40, 0)
+HORIZON_RGB = (250, 170, 60)
+LIMIT_RGB = (230, 20, 20)
+
+
+@dataclass
+class RolloutScene:
+    """Scene arrays of one rollout, from its timeline. T steps, N chunks, H horizon.
+
+    Attributes:
+        q_pred: (T, 6) predicted joints [rad], JOINT_NAMES order.
+        q_gt: (T, 6) GT joints at the same time [rad], or None.
+        ee_pred, ee_gt: (T, 3) gripper-frame positions [m] (``ee_gt`` None without GT joints).
+        trail: (N, H, 3) gripper-frame positions along every chunk's full horizon [m].
+        trail_violation: (N, H) horizon steps with any joint past its limit.
+        joint_pos: (T, 6, 3) position of each joint (its child link's origin) [m].
+        executed: horizon steps of a chunk that are executed (the rest is only predicted).
+    """
+
+    q_pred: Array
+    q_gt: Array | None
+    ee_pred: Array
+    ee_gt: Array | None
+    trail: Array
+    trail_violation: npt.NDArray[np.bool_]
+    joint_pos: Array
+    executed: int
+    steps_per_chunk: int
+
+    @property
+    def n_steps(self) -> int:
+        return int(self.q_pred.shape[0])
+
+    @classmethod
+    def from_timeline(cls, tl: RolloutTimeline, joint_links: dict[str, str]) -> RolloutScene:
+        """Batched FK of everything the scene needs (a few ms for a 60-chunk rollout)."""
+        fk = kinematics()
+        q_pred = to_radians(tl.pred, tl.units)
+        n, h = tl.chunks.shape[:2]
+        trail = fk.gripper_positions(tl.chunks.reshape(-1, len(JOINT_NAMES)), tl.units).reshape(n, h, 3)
+        links = tuple(joint_links[j] for j in JOINT_NAMES)
+        poses = fk.link_poses(q_pred, links=links)
+        joint_pos = np.stack([poses[link][:, :3, 3] for link in links], axis=1)
+        executed = h if tl.kind == "single_chunk" else tl.executed_per_chunk
+        return cls(
+            q_pred=q_pred,
+            q_gt=None if tl.gt_aligned is None else to_radians(tl.gt_aligned, tl.units),
+            ee_pred=tl.ee_pred,
+            ee_gt=tl.ee_gt,
+            trail=trail,
+            trail_violation=tl.chunk_limit_violation.any(axis=-1),
+            joint_pos=joint_pos,
+            executed=executed,
+            steps_per_chunk=tl.steps_per_chunk,
+        )
+
+
+class _NoArm:
+    """Stands in for an arm when the robot model could not be loaded (paths and plots still work)."""
+
+    visible = False
+
+    def __init__(self, *args) -> None:
+        pass
+
+    def set_joints(self, q_rad) -> None:
+        pass
+
+
+def _path_segments(points: Array) -> Array:
+    """(P, 3) polyline -> (P-1, 2, 3) segments."""
+    points = np.asarray(points, np.float32)
+    if len(points) < 2:
+        return np.zeros((0, 2, 3), np.float32)
+    return np.stack([points[:-1], points[1:]], axis=1)
+
+
+class TabScene:
+    """One client's scene nodes; everything the scrub step changes goes through :meth:`set_step`.
+
+    Args:
+        client: the viser ClientHandle.
+        robot: the shared robot (meshes loaded once per app), or None to draw no arms.
+    """
+
+    def __init__(self, client, robot: SharedRobot | None) -> None:
+        self._client = client
+        scene = client.scene
+        # Shadows of translucent arms read as clutter, and cost a lot on GPU-less browsers.
+        scene.configure_default_lights(cast_shadow=False)
+        scene.add_grid("/ground", width=1.2, height=1.2, cell_size=0.05, section_size=0.25,
+                       position=(0.15, 0.0, 0.0))
+        arm = ArmView if robot is not None else _NoArm
+        self.gt_arm = arm(client, robot, "/arms/gt", GT_COLOR)
+        self.pred_arm = arm(client, robot, "/arms/pred", PRED_COLOR)
+        self._robot = robot
+        self.cmp_arm: ArmView | None = None  # drawn on the first compare: most tabs never need it
+        self._ee_pred = scene.add_icosphere("/now/pred", radius=0.008, color=PRED_RGB)
+        self._ee_gt = scene.add_icosphere("/now/gt", radius=0.008, color=GT_RGB)
+        self._limit_spheres = [
+            scene.add_icosphere(f"/limits/{j}/sphere", radius=0.018, color=LIMIT_RGB, opacity=0.7,
+                                visible=False)
+            for j in JOINT_NAMES
+        ]
+        self._limit_labels = [
+            scene.add_label(f"/limits/{j}/label", j, visible=False, anchor="bottom-left")
+            for j in JOINT_NAMES
+        ]
+        self._paths: list = []
+        self._trail: list = []
+        self._trail_chunk: int | None = None
+        self.data: RolloutScene | None = None
+        self.compare: RolloutScene | None = None
+        self._limit_text: list[str] = [""] * len(JOINT_NAMES)
+
+    # -- rollout changes ----------------------------------------------------------------------
+    def show(self, data: RolloutScene | None, compare: RolloutScene | None = None) -> None:
+        """Draw a rollout's static parts (paths) and hide what it lacks (GT arm without GT joints)."""
+        scene = self._client.scene
+        for node in self._paths + self._trail:
+            node.remove()
+        self._paths, self._trail, self._trail_chunk = [], [], None
+        self.data, self.compare = data, compare
+        has = data is not None
+        self.pred_arm.visible = has
+        self._ee_pred.visible = has
+        self.gt_arm.visible = has and data.q_gt is not None
+        self._ee_gt.visible = self.gt_arm.visible
+        if has and compare is not None and self.cmp_arm is None:
+            arm = ArmView if self._robot is not None else _NoArm
+            self.cmp_arm = arm(self._client, self._robot, "/arms/compare", CMP_COLOR)
+        if self.cmp_arm is not None:
+            self.cmp_arm.visible = has and compare is not None
+        for marker in (*self._limit_spheres, *self._limit_labels):
+            marker.visible = False
+        if not has:
+            return
+        self._paths.append(scene.add_line_segments(
+            "/paths/pred", _path_segments(data.ee_pred), PRED_RGB, thickness=2.0,
+            thickness_units="screen"))
+        if data.ee_gt is not None:
+            self._paths.append(scene.add_line_segments(
+                "/paths/gt", _path_segments(data.ee_gt), GT_RGB, thickness=2.0,
+                thickness_units="screen"))
+        if compare is not None:
+            self._paths.append(scene.add_line_segments(
+                "/paths/compare", _path_segments(compare.ee_pred), CMP_RGB, thickness=1.5,
+                thickness_units="screen"))
+
+    # -- the scrub step -----------------------------------------------------------------------
+    def set_step(self, step: int, limit_text: list[str] | None = None) -> None:
+        """Pose every arm at ``step``, move the trail to its chunk, show joints over their limits.
+
+        Args:
+            step: global executed step (already clamped).
+            limit_text: per joint, the label to show when that joint is past its limit at this step
+                ("" = within limits).
+        """
+        data = self.data
+        if data is None:
+            return
+        self.pred_arm.set_joints(data.q_pred[step])
+        self._ee_pred.position = tuple(data.ee_pred[step])
+        if data.q_gt is not None:
+            self.gt_arm.set_joints(data.q_gt[step])
+            self._ee_gt.position = tuple(data.ee_gt[step])
+        if self.compare is not None and self.cmp_arm is not None:
+            self.cmp_arm.set_joints(self.compare.q_pred[min(step, self.compare.n_steps - 1)])
+        chunk = min(step // data.steps_per_chunk, len(data.trail) - 1)
+        if chunk != self._trail_chunk:
+            self._draw_trail(chunk)
+        for j, text in enumerate(limit_text or [""] * len(JOINT_NAMES)):
+            on = bool(text)
+            sphere, label = self._limit_spheres[j], self._limit_labels[j]
+            if on:
+                pos = tuple(data.joint_pos[step, j])
+                sphere.position = pos
+                label.position = pos
+                if text != self._limit_text[j]:
+                    label.text = text
+            if sphere.visible != on:
+                sphere.visible = on
+                label.visible = on
+            self._limit_text[j] = text
+
+    def _draw_trail(self, chunk: int) -> None:
+        """Replace the horizon trail by chunk ``chunk``'s (executed part set apart)."""
+        data = self.data
+        assert data is not None
+        scene = self._client.scene
+        for node in self._trail:
+            node.remove()
+        pts = data.trail[chunk]
+        e = min(data.executed, len(pts))
+        self._trail = [
+            scene.add_line_segments("/trail/executed", _path_segments(pts[:e]), EXECUTED_RGB,
+                                    thickness=5.0, thickness_units="screen"),
+            scene.add_point_cloud("/trail/points", pts.astype(np.float32),
+                                  colors=np.where(data.trail_violation[chunk][:, None],
+                                                  np.array(LIMIT_RGB), np.array(HORIZON_RGB)).astype(np.uint8),
+                                  point_size=0.005, point_shape="circle"),
+        ]
+        if e < len(pts):
+            self._trail.append(scene.add_line_segments(
+                "/trail/predicted", _path_segments(pts[e - 1:] if e > 0 else pts), HORIZON_RGB,
+                thickness=2.0, thickness_units="screen"))
+        self._trail_chunk = chunk

@@ -1,0 +1,159 @@
+"""``inspector serve``: the viser server, shared caches, and one :class:`TabState` per browser tab."""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from collections.abc import Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
+from pathlib import Path
+
+from ..errors import InspectorError
+from ..session import is_session
+from ..sources import BUNDLED_DEMO, Sources, open_sources
+from ._catalog import Catalog
+from ._robot import SharedRobot, joint_child_links
+from ._state import TabState
+
+# Video decoders (PyAV decodes outside the GIL): one per core, up to four.
+DECODE_WORKERS = max(2, min(4, os.cpu_count() or 2))
+
+
+class InspectorApp:
+    """A running inspector: the viser server, the served rollouts, and the open tabs.
+
+    Args:
+        sources: opened sessions (kept open, closed by :meth:`stop`).
+        host, port: where to listen (port 0 picks a free port; a busy port moves up by one).
+
+    Attributes:
+        catalog: the served rollouts and their shared data.
+        tabs: ``{client_id: TabState}`` of the connected tabs.
+    """
+
+    def __init__(self, sources: Sources, host: str = "127.0.0.1", port: int = 8080) -> None:
+        import viser
+
+        self.sources = sources
+        self.tabs: dict[int, TabState] = {}
+        self._tabs_changed = threading.Condition()
+        self._decoder = ThreadPoolExecutor(DECODE_WORKERS, thread_name_prefix="inspector-decode")
+        # Meshes and the FK chain take ~1 s to load: start now, wait only where they are needed.
+        loader = ThreadPoolExecutor(1, thread_name_prefix="inspector-robot")
+        self._robot: Future[SharedRobot] = loader.submit(_load_robot)
+        loader.shutdown(wait=False)  # the one job still runs; the thread exits after it
+        self.catalog = Catalog(sources, self._decoder, joint_child_links())
+        self.server = viser.ViserServer(host=host, port=port, label="inspector", verbose=False)
+        self.server.initial_camera.position = (0.40, -0.32, 0.28)
+        self.server.initial_camera.look_at = (0.10, 0.0, 0.10)
+        self.server.on_client_connect(self._connect)
+        self.server.on_client_disconnect(self._disconnect)
+
+    @property
+    def port(self) -> int:
+        return self.server.get_port()
+
+    @property
+    def host(self) -> str:
+        return self.server.get_host()
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.host}:{self.port}"
+
+    def robot(self) -> SharedRobot:
+        """The shared robot (blocks until its meshes are loaded)."""
+        return self._robot.result()
+
+    def _connect(self, client) -> None:
+        tab = TabState(self, client)
+        with tab.lock:  # whoever finds the tab in ``tabs`` waits on its lock for the first open
+            with self._tabs_changed:
+                self.tabs[client.client_id] = tab
+                self._tabs_changed.notify_all()
+            key = self.catalog.default_key()
+            if key is not None and not tab.closed.is_set():
+                tab.open(key)
+
+    def _disconnect(self, client) -> None:
+        with self._tabs_changed:
+            tab = self.tabs.pop(client.client_id, None)
+            self._tabs_changed.notify_all()
+        if tab is not None:
+            tab.close()
+
+    def wait_for_tabs(self, n: int = 1, timeout: float = 60.0) -> list[TabState]:
+        """Wait until ``n`` tabs are connected (and have opened their first rollout)."""
+        deadline = time.monotonic() + timeout
+        with self._tabs_changed:
+            while len(self.tabs) < n:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise TimeoutError(f"{len(self.tabs)} of {n} tabs connected after {timeout} s")
+                self._tabs_changed.wait(left)
+            tabs = list(self.tabs.values())
+        for tab in tabs:  # a tab registers holding its lock until its first rollout is open
+            with tab.lock:
+                pass
+        return tabs
+
+    def stop(self) -> None:
+        """Close every tab, stop the server and drop temporary sessions."""
+        for tab in list(self.tabs.values()):
+            tab.close()
+        self.server.stop()
+        self._decoder.shutdown(wait=False, cancel_futures=True)
+        self.sources.close()
+
+
+def _load_robot() -> SharedRobot:
+    from ..kinematics import kinematics
+
+    kinematics()  # build the FK chain now rather than on the first rollout open
+    return SharedRobot()
+
+
+def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", port: int = 8080,
+          share: bool = False, dataset: str | Path | None = None, block: bool = True) -> InspectorApp:
+    """Serve sessions in the browser (the bundled demo when ``paths`` is empty).
+
+    Args:
+        paths: sessions, rollout directories or DreamZero-SO101 outputs (see ``open_sources``).
+        host: interface to bind; 127.0.0.1 unless the user asks otherwise.
+        port: TCP port (0 = any free port).
+        share: also request a public viser share URL.
+        dataset: LeRobot dataset with the GT episodes, for sessions that name none.
+        block: serve until Ctrl-C (then stop); False returns the running app at once.
+
+    Returns:
+        The :class:`InspectorApp` (``.port``, ``.url``, ``.stop()``, ``.tabs``).
+
+    Raises:
+        InspectorError: no path given and the bundled demo is not built, or a path is unreadable.
+    """
+    paths = list(paths or [])
+    if not paths:
+        if not is_session(BUNDLED_DEMO):
+            raise InspectorError(BUNDLED_DEMO, "the bundled demo session is not built yet; build it with "
+                                 "`inspector demo --rebuild`, or serve a session: `inspector serve PATH`")
+        paths = [BUNDLED_DEMO]
+    sources = open_sources(paths, dataset=dataset)
+    app = InspectorApp(sources, host=host, port=port)
+    n_ok = sum(len(s.rollouts) for s in sources.sessions)
+    n_bad = sum(len(s.errors) for s in sources.sessions)
+    print(f"inspector: serving {n_ok} rollout(s) from {len(sources.sessions)} session(s)"
+          + (f" ({n_bad} could not be read; see the app)" if n_bad else "") + f" at {app.url}", flush=True)
+    if share:
+        url = app.server.request_share_url(verbose=False)
+        print(f"inspector: share URL {url}" if url else "inspector: no share URL could be obtained", flush=True)
+    if not block:
+        return app
+    try:
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        app.stop()
+    return app

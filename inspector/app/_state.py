@@ -1,0 +1,573 @@
+"""One browser tab's state: which rollout, which step, playing or not, and its GUI and scene.
+
+Each connected client gets a :class:`TabState`; nothing in it is shared with other tabs, so one
+person scrubbing never moves another's view. Shared, read-only data (timelines, frames, meshes)
+comes from the app's :class:`~._catalog.Catalog`.
+
+:meth:`TabState.set_step` is the scrub step (FK-posed arms, trail, limit markers, video frames,
+plot cursors, slider values): the entry point for benchmarks, e.g.::
+
+    app = serve(["/tmp/s1"], port=0, block=False)
+    with HeadlessClient(app.port):           # inspector.app._headless: a tab without a browser
+        tab = app.wait_for_tabs(1)[0]
+        tab.open("s1 / ep000_train")
+        tab.set_step(100)
+    app.stop()
+
+Every GUI callback runs on viser's thread pool; the tab's ``lock`` (re-entrant) serialises them
+with the playback thread and the background frame loader. Programmatic value changes also fire
+viser callbacks (with ``event.client`` None); those are ignored, so only the user's moves act.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..errors import InspectorError
+from ..units import JOINT_NAMES
+from ._annotations import rollout_annotations, update_annotation
+from ._cards import error_card, esc, headline_metrics, rollout_card, unit, video_grid
+from ._catalog import Loaded
+from ._frames import FramePair
+from ._panels import NO_COMPARE, ControlPanel, PlotPanel, VideoPanel
+from ._scene import TabScene
+
+if TYPE_CHECKING:
+    from ._server import InspectorApp
+
+PLAYBACK_FPS = 30.0
+PLOT_CURSOR_HZ = 10.0
+
+
+class TabState:
+    """Everything one tab shows, and the actions its controls trigger.
+
+    Attributes:
+        key: catalog key of the open rollout (None before the first open).
+        loaded: its shared data, or None when it failed (then ``error`` says why).
+        compare: the compared rollout's shared data, or None.
+        step: current global executed step.
+        playing, speed: playback state (speed as a factor of real time).
+        pairs: the video pairs last shown (view, frame indices, PSNR) — for tests.
+    """
+
+    def __init__(self, app: InspectorApp, client) -> None:
+        self.app = app
+        self.client = client
+        self.client_id: int = client.client_id
+        self.lock = threading.RLock()
+        self.closed = threading.Event()
+        self.key: str | None = None
+        self.loaded: Loaded | None = None
+        self.error: BaseException | None = None
+        self.compare_key: str | None = None
+        self.compare: Loaded | None = None
+        self.step = 0
+        self.playing = False
+        self.speed = 1.0
+        self.pairs: list[FramePair] = []
+        self.export_result: str | None = None  # what the last export did (for tests and logs)
+        self._play_generation = 0
+        self._video_html = ""
+        self._notes: dict[str, Any] = {}
+        self._shown_chunk: int | None = None
+        self._listener = self._on_frames  # one bound method, so it can be removed again
+        self.robot_note = ""
+
+        catalog = app.catalog
+        gui = client.gui
+        gui.configure_theme(control_width="large", show_share_button=False, brand_color=(230, 119, 0))
+        with client.atomic():
+            errors = {k for k, e in catalog.entries.items() if e.error}
+            self.controls = ControlPanel(gui, catalog.keys(), errors, client.client_id)
+            self.right_panel = gui.add_panel()
+            with self.right_panel.add_tab("Video & plots", icon="video"):
+                self.video = VideoPanel(gui)
+                self.plots = PlotPanel(gui)
+            gui.main_panel.dock_left()
+            gui.main_panel.set_width(350)
+            self.right_panel.dock_right()
+            self.right_panel.set_width(600)
+        try:
+            robot = app.robot()  # waits for the shared meshes on the first tab
+            self.robot_note = robot.fallback_reason or ""
+        except Exception as exc:  # draw paths and plots without arms rather than nothing
+            robot, self.robot_note = None, f"robot model failed to load ({type(exc).__name__}: {exc})"
+        self.scene = TabScene(client, robot)
+        self._wire()  # only now: a control moved earlier would find no scene
+
+    # ------------------------------------------------------------------------------------------
+    # Opening rollouts
+
+    def open(self, key: str) -> bool:
+        """Show rollout ``key`` (a catalog key) from its first step.
+
+        Returns:
+            True when it opened; False when it failed (its error card is shown instead) or the key
+            is not a served rollout.
+        """
+        entry = self.app.catalog.get(key)
+        if entry is None:
+            return False
+        with self.lock:
+            self.pause()
+            self._detach()
+            self.key, self.loaded, self.error = key, None, None
+            self._set_quietly(self.controls.picker, self.controls.key_to_option[key])
+            self.controls.card.content = "<div style='font-size:0.8rem;color:#6b7280'>loading…</div>"
+            try:
+                loaded = self.app.catalog.load(key)
+            except Exception as exc:  # shown, not thrown: the rest of the app keeps working
+                self.error = exc
+                self._show_error(entry.tag, exc)
+                return False
+            self.loaded = loaded
+            # Listen first: a view that finishes meanwhile waits on our lock, then redraws.
+            loaded.frames.add_listener(self._listener)
+            if self.compare_key == key:
+                self.compare_key, self.compare = None, None
+                self._set_quietly(self.controls.compare, NO_COMPARE)
+            with self.client.atomic():
+                self._show_loaded()
+                self.step = -1
+                self._shown_chunk = None
+                self.set_step(0)
+            return True
+
+    def set_compare(self, key: str | None) -> bool:
+        """Compare with rollout ``key`` (None to stop): its arm, path, joints and the divergence."""
+        with self.lock:
+            if key is None or key == self.key or self.app.catalog.get(key) is None:
+                self.compare_key, self.compare = None, None
+                self.controls.compare_info.content = ""
+                ok = key is None
+            else:
+                try:
+                    self.compare = self.app.catalog.load(key)
+                    self.compare_key = key
+                    ok = True
+                except Exception as exc:
+                    self.compare_key, self.compare = None, None
+                    self.controls.compare_info.content = error_card(f"cannot compare with {key}", exc)
+                    ok = False
+            self._set_quietly(self.controls.compare, self.compare_key or NO_COMPARE)
+            if self.loaded is not None:
+                with self.client.atomic():
+                    self._show_loaded(keep_notes=True)
+                    self.set_step(self.step, force=True)
+            return ok
+
+    def _detach(self) -> None:
+        if self.loaded is not None:
+            self.loaded.frames.remove_listener(self._listener)
+
+    def _show_error(self, tag: str, exc: BaseException) -> None:
+        c = self.controls
+        with self.client.atomic():
+            c.error.content = error_card(f"cannot open rollout {tag}", exc)
+            c.error.visible = True
+            c.card.content = ""
+            c.readout.content = ""
+            self.scene.show(None)
+            self.plots.clear()
+            self._video_html = ""
+            self.video.html.content = "<div style='font-size:0.8rem;color:#6b7280'>—</div>"
+            self.pairs = []
+
+    def _show_loaded(self, keep_notes: bool = False) -> None:
+        """Draw what changes per rollout: card, slider ranges, scene paths, plots, notes."""
+        loaded = self.loaded
+        assert loaded is not None
+        tl = loaded.timeline
+        c = self.controls
+        c.error.visible = False
+        self._refresh_card()
+        self._set_quietly(c.chunk, 0)
+        self._set_quietly(c.step_in_chunk, 0)
+        c.chunk.max = max(tl.n_chunks - 1, 0)
+        c.step_in_chunk.max = max(tl.steps_per_chunk - 1, 0)
+        c.step_in_chunk.label = "Step in chunk" if tl.kind == "autoregressive" else "Step"
+        cmp = self.compare
+        self.scene.show(loaded.scene, cmp.scene if cmp is not None else None)
+        self.plots.build(tl, cmp.timeline if cmp is not None else None, loaded.frames.psnr)
+        self._refresh_compare_info()
+        if not keep_notes:
+            self._load_notes()
+
+    def _refresh_card(self) -> None:
+        loaded = self.loaded
+        if loaded is None:
+            return
+        tl = loaded.timeline
+        gt_note = "" if tl.has_gt_joints else "no GT joints: only the predicted arm is drawn"
+        metrics = headline_metrics(tl, loaded.frames.psnr, loading_video=not loaded.frames.done.is_set())
+        if self.robot_note:
+            metrics.insert(0, ("robot model", self.robot_note))
+        self.controls.card.content = rollout_card(tl, metrics, gt_note)
+
+    def _refresh_compare_info(self) -> None:
+        if self.compare is None or self.loaded is None:
+            self.controls.compare_info.content = ""
+            return
+        from ..metrics import prompt_divergence
+
+        a, b = self.loaded.timeline, self.compare.timeline
+        _, per_chunk, collapse = prompt_divergence(a.pred, b.pred, a.steps_per_chunk)
+        finite = per_chunk[np.isfinite(per_chunk)]
+        peak = f"{finite.max():.1f}" if finite.size else "—"
+        meet = f"they meet again from chunk {collapse}" if collapse is not None else "they do not meet again"
+        self.controls.compare_info.content = (
+            "<div style='font-size:0.78rem'>"
+            f"<span style='color:#1c7ed6'>■</span> blue arm: <b>{esc(b.tag)}</b><br>"
+            f"prompt: {esc(b.rollout.prompt or '—')}<br>"
+            f"divergence per chunk: max {peak}; {esc(meet)}</div>")
+
+    # ------------------------------------------------------------------------------------------
+    # The scrub step
+
+    def set_step(self, step: int, force: bool = False, source=None, cursor: bool = True) -> int:
+        """Move this tab to global step ``step`` (clamped): arms, trail, limits, video, plots, sliders.
+
+        Args:
+            step: global executed step.
+            force: redraw even if the step did not change.
+            source: the slider the user is moving, if any: it is not written back, so a drag whose
+                updates are handled out of order never snaps the thumb back.
+            cursor: move the plot cursors too (playback skips some: they are most of the bytes).
+
+        Returns:
+            The step shown.
+        """
+        with self.lock:
+            loaded = self.loaded
+            if loaded is None:
+                return self.step
+            tl = loaded.timeline
+            step = int(np.clip(step, 0, tl.n_steps - 1))
+            if step == self.step and not force:
+                return step
+            self.step = step
+            with self.client.atomic():
+                self.scene.set_step(step, self._limit_text(step))
+                self._render_video()
+                if cursor:
+                    self.plots.set_cursor(float(tl.t_s[step]))
+                self._show_time(source)
+            return step
+
+    def set_chunk(self, chunk: int, step_in_chunk: int | None = None, source=None) -> int:
+        """Go to ``chunk`` (clamped), keeping the step within the chunk unless one is given."""
+        with self.lock:
+            if self.loaded is None:
+                return self.step
+            tl = self.loaded.timeline
+            chunk = int(np.clip(chunk, 0, tl.n_chunks - 1))
+            within = self.step_in_chunk if step_in_chunk is None else step_in_chunk
+            return self.set_step(tl.step_of(chunk, within), source=source)
+
+    @property
+    def chunk(self) -> int:
+        return 0 if self.loaded is None else self.step // self.loaded.timeline.steps_per_chunk
+
+    @property
+    def step_in_chunk(self) -> int:
+        return 0 if self.loaded is None else self.step % self.loaded.timeline.steps_per_chunk
+
+    def jump_to_worst_chunk(self) -> int:
+        with self.lock:
+            if self.loaded is None:
+                return self.step
+            return self.set_chunk(self.loaded.timeline.worst_chunk(), 0)
+
+    def _limit_text(self, step: int) -> list[str]:
+        tl = self.loaded.timeline  # type: ignore[union-attr]
+        row = tl.limit_violation[step]
+        if not row.any():
+            return [""] * len(JOINT_NAMES)
+        out = []
+        for j, name in enumerate(JOINT_NAMES):
+            if not row[j]:
+                out.append("")
+                continue
+            v, (lo, hi) = tl.pred[step, j], tl.limits[j]
+            u = "" if name == "gripper" or tl.units.arm != "degrees" else "°"
+            out.append(f"⚠ {name} {v:.0f}{u} {'>' if v > hi else '<'} limit {hi if v > hi else lo:.0f}{u}")
+        return out
+
+    def _render_video(self) -> None:
+        loaded = self.loaded
+        assert loaded is not None
+        tl = loaded.timeline
+        self.pairs = [loaded.frames.pair(v, self.step) for v in loaded.frames.views]
+        html = video_grid(self.pairs, self.step, float(tl.t_s[self.step]))
+        if html != self._video_html:  # the GT frame often stays while the imagined one moves
+            self._video_html = html
+            self.video.html.content = html
+
+    def _show_time(self, source=None) -> None:
+        tl = self.loaded.timeline  # type: ignore[union-attr]
+        c, step = self.controls, self.step
+        chunk, within = divmod(step, tl.steps_per_chunk)
+        for slider, value in ((c.chunk, chunk), (c.step_in_chunk, within)):
+            if slider is not source:
+                self._set_quietly(slider, value)
+        notes = []
+        if tl.post_episode is not None and tl.post_episode[step] or (
+                tl.episode_end_step is not None and step >= tl.episode_end_step):
+            notes.append("<span style='color:#c92a2a'>past the real episode's end</span>")
+        over = [j for j, v in zip(JOINT_NAMES, tl.limit_violation[step]) if v]
+        if over:
+            notes.append(f"<span style='color:#c92a2a'>over limit: {', '.join(over)}</span>")
+        if tl.time_aligned_drift is not None:
+            u = unit(tl)
+            notes.append(f"drift {tl.time_aligned_drift[step]:.1f}{u} (best-match {tl.best_match_drift[step]:.1f}{u})")
+        c.readout.content = (
+            "<div style='font-size:0.78rem;line-height:1.4'>"
+            f"t = <b>{tl.t_s[step]:.2f} s</b> · step {step} / {tl.n_steps - 1} · chunk {chunk} / "
+            f"{tl.n_chunks - 1} · imagined frame {tl.frame_index(step)}"
+            + (f"<br>{' · '.join(notes)}" if notes else "") + "</div>")
+        if chunk != self._shown_chunk:
+            self._shown_chunk = chunk
+            self._show_chunk_notes(chunk)
+
+    # ------------------------------------------------------------------------------------------
+    # Playback
+
+    def play(self) -> None:
+        """Start playing from the current step (from the start if at the end)."""
+        with self.lock:
+            if self.playing or self.loaded is None:
+                return
+            if self.step >= self.loaded.timeline.n_steps - 1:
+                self.set_step(0)
+            self.playing = True
+            self._play_generation += 1
+            self.controls.play.label = "Pause"
+            self.controls.play.icon = "player-pause"
+            threading.Thread(target=self._play_loop, args=(self._play_generation,),
+                             name=f"inspector-play-{self.client_id}", daemon=True).start()
+
+    def pause(self) -> None:
+        with self.lock:
+            if not self.playing:
+                return
+            if self.loaded is not None:  # the cursors may lag a throttled playback step
+                self.plots.set_cursor(float(self.loaded.timeline.t_s[self.step]))
+            self.playing = False
+            self._play_generation += 1
+            self.controls.play.label = "Play"
+            self.controls.play.icon = "player-play"
+
+    def _play_loop(self, generation: int) -> None:
+        """Advance at ``fps * speed`` steps per second, drawing at most PLAYBACK_FPS times a second.
+
+        Stops when paused, when the rollout changes, at the last step, or when the tab closes.
+        """
+        last = last_cursor = time.monotonic()
+        budget = 0.0  # fractional steps owed (slow speeds advance less than a step per tick)
+        while not self.closed.wait(1.0 / PLAYBACK_FPS):
+            now = time.monotonic()
+            with self.lock:
+                if generation != self._play_generation or self.loaded is None:
+                    return
+                tl = self.loaded.timeline
+                budget += (now - last) * tl.fps * self.speed
+                last = now
+                n = int(budget)
+                if n == 0:
+                    continue
+                budget -= n
+                target = self.step + n
+                at_end = target >= tl.n_steps - 1
+                # Plot cursors at PLOT_CURSOR_HZ: the arms and video move at the full rate.
+                cursor = at_end or now - last_cursor >= 1.0 / PLOT_CURSOR_HZ
+                last_cursor = now if cursor else last_cursor
+                self.set_step(target, cursor=cursor)
+                if at_end:
+                    self.pause()
+                    return
+
+    # ------------------------------------------------------------------------------------------
+    # Notes and export
+
+    def _load_notes(self) -> None:
+        c = self.controls
+        self._notes = {}
+        c.notes_info.content = ""
+        entry = self.app.catalog.get(self.key) if self.key else None
+        if entry is not None:
+            try:
+                self._notes = rollout_annotations(entry.session.root, entry.tag)
+            except InspectorError as exc:
+                c.notes_info.content = error_card("annotations.json is unreadable", exc)
+        self._set_quietly(c.flag_rollout, bool(self._notes.get("flag", False)))
+        self._set_quietly(c.note_rollout, str(self._notes.get("note", "")))
+        self._shown_chunk = None
+
+    def _show_chunk_notes(self, chunk: int) -> None:
+        c = self.controls
+        entry = (self._notes.get("chunks") or {}).get(str(chunk), {})
+        c.flag_chunk.label = f"Flag chunk {chunk}"
+        self._set_quietly(c.flag_chunk, bool(entry.get("flag", False)))
+        self._set_quietly(c.note_chunk, str(entry.get("note", "")))
+        flagged = sorted(int(k) for k, v in (self._notes.get("chunks") or {}).items() if v.get("flag"))
+        if flagged:
+            c.notes_info.content = (f"<div style='font-size:0.75rem'>flagged chunks: "
+                                    f"{esc(', '.join(map(str, flagged)))}</div>")
+
+    def save_notes(self, rollout_flag: bool | None = None, rollout_note: str | None = None,
+                   chunk_flag: bool | None = None, chunk_note: str | None = None) -> bool:
+        """Write the rollout's and the current chunk's flag/note to the session's annotations.json.
+
+        Arguments left None are taken from the Notes controls. Returns True when written.
+        """
+        with self.lock:
+            entry = self.app.catalog.get(self.key) if self.key else None
+            if entry is None or self.loaded is None:
+                return False
+            c = self.controls
+            chunk = self.chunk
+            try:
+                update_annotation(entry.session.root, entry.tag,
+                                  flag=c.flag_rollout.value if rollout_flag is None else rollout_flag,
+                                  note=c.note_rollout.value if rollout_note is None else rollout_note)
+                self._notes = update_annotation(
+                    entry.session.root, entry.tag, chunk=chunk,
+                    flag=c.flag_chunk.value if chunk_flag is None else chunk_flag,
+                    note=c.note_chunk.value if chunk_note is None else chunk_note)
+            except (InspectorError, OSError) as exc:
+                c.notes_info.content = error_card("notes not saved", exc)
+                return False
+            self._shown_chunk = None
+            self._show_time()
+            self._notify("Notes saved", f"{entry.tag}, chunk {chunk} → annotations.json")
+            return True
+
+    def export(self) -> threading.Thread | None:
+        """Write the open rollout's .rrd in a thread and send it to this tab as a download."""
+        with self.lock:
+            loaded = self.loaded
+        if loaded is None:
+            self._notify("Nothing to export", "Open a rollout first.", color="yellow")
+            return None
+        try:
+            from ..export import write_recording
+        except ImportError as exc:
+            self._notify("Export unavailable", f"inspector.export could not be imported ({exc}).", color="red")
+            return None
+        tag = loaded.timeline.tag
+        note = self.client.add_notification("Exporting", f"{tag}.rrd …", loading=True, with_close_button=False)
+        self.export_result = None
+
+        def progress(fraction: float, message: str) -> None:
+            note.body = f"{tag}.rrd: {message} ({fraction:.0%})"
+
+        def work() -> None:
+            try:
+                with tempfile.TemporaryDirectory(prefix="inspector-export-") as tmp:
+                    path = Path(tmp) / f"{tag}.rrd"
+                    write_recording(loaded.timeline, path, progress=progress)
+                    data = path.read_bytes()
+                self.client.send_file_download(f"{tag}.rrd", data, save_immediately=True)
+                note.title, note.body = "Exported", f"{tag}.rrd ({len(data) / 1e6:.1f} MB)"
+                note.color = "green"
+                self.export_result = f"sent {len(data)} bytes"
+            except Exception as exc:  # report, never crash the tab
+                message = " ".join(str(exc).split()) or type(exc).__name__
+                note.title, note.body, note.color = "Export failed", message, "red"
+                self.export_result = f"failed: {message}"
+            note.loading = False
+            note.with_close_button = True
+
+        thread = threading.Thread(target=work, name=f"inspector-export-{self.client_id}", daemon=True)
+        thread.start()
+        return thread
+
+    def _notify(self, title: str, body: str, color: str | None = None) -> None:
+        try:
+            self.client.add_notification(title, body, auto_close_seconds=4.0, color=color)
+        except Exception:
+            pass  # the tab may be gone
+
+    # ------------------------------------------------------------------------------------------
+    # Background frames, wiring, teardown
+
+    def _on_frames(self) -> None:
+        """A view finished decoding (or its PSNR is ready): redraw what shows it."""
+        with self.lock:
+            if self.closed.is_set() or self.loaded is None:
+                return
+            with self.client.atomic():
+                self._render_video()
+                self.plots.update_psnr(self.loaded.frames.psnr)
+                self.plots.set_cursor(float(self.loaded.timeline.t_s[self.step]))
+                self._refresh_card()
+
+    def close(self) -> None:
+        """The client went away: stop playback and let go of shared data."""
+        self.closed.set()
+        with self.lock:
+            self.playing = False
+            self._play_generation += 1
+            self._detach()
+
+    @staticmethod
+    def _set_quietly(handle, value) -> None:
+        """Set a control's value; the callback it fires (client None) is ignored by ``_wire``."""
+        if handle.value != value:
+            handle.value = value
+
+    def _wire(self) -> None:
+        c, gui = self.controls, self.client.gui
+
+        def user(fn):
+            """Run ``fn(event)`` only for the user's own changes, not our programmatic ones."""
+            def cb(event) -> None:
+                if event.client is not None and not self.closed.is_set():
+                    fn(event)
+            return cb
+
+        c.picker.on_update(user(lambda e: (k := c.key_of(e.target.value)) and self.open(k)))
+        # Slider callbacks may run out of order on the pool: read the latest value, not the event's.
+        c.chunk.on_update(user(lambda e: self._slider_moved(c.chunk)))
+        c.step_in_chunk.on_update(user(lambda e: self._slider_moved(c.step_in_chunk)))
+        c.play.on_click(user(lambda e: self.pause() if self.playing else self.play()))
+        c.speed.on_update(user(lambda e: setattr(self, "speed", float(e.target.value.rstrip("x")))))
+        nav = {"◀ prev": lambda: self.set_chunk(self.chunk - 1),
+               "next ▶": lambda: self.set_chunk(self.chunk + 1),
+               "worst": self.jump_to_worst_chunk}
+        c.nav.on_click(user(lambda e: nav[e.target.value]()))
+        c.compare.on_update(user(lambda e: self.set_compare(None if e.target.value == NO_COMPARE else e.target.value)))
+        c.save_notes.on_click(user(lambda e: self.save_notes()))
+        c.export.on_click(user(lambda e: self.export()))
+        self.plots.joint.on_update(user(lambda e: self._show_joint(e.target.value)))
+        # Step keys (ignored while typing in a text field).
+        for label, key, action in (
+            ("Previous step", "J", lambda: self.set_step(self.step - 1)),
+            ("Next step", "L", lambda: self.set_step(self.step + 1)),
+            ("Play / pause", "K", lambda: self.pause() if self.playing else self.play()),
+            ("Previous chunk", "pageup", lambda: self.set_chunk(self.chunk - 1)),
+            ("Next chunk", "pagedown", lambda: self.set_chunk(self.chunk + 1)),
+            ("Worst chunk", "W", self.jump_to_worst_chunk),
+        ):
+            gui.add_command(label, hotkey=key).on_trigger(user(lambda e, a=action: a()))
+
+    def _slider_moved(self, slider) -> None:
+        with self.lock:
+            c = self.controls
+            if slider is c.chunk:
+                self.set_chunk(int(c.chunk.value), source=slider)
+            else:
+                self.set_chunk(self.chunk, int(c.step_in_chunk.value), source=slider)
+
+    def _show_joint(self, joint: str) -> None:
+        with self.lock:
+            self.plots.show_joint(joint)
+            if self.loaded is not None:
+                self.plots.set_cursor(float(self.loaded.timeline.t_s[self.step]))
