@@ -7,7 +7,10 @@ All joint-space figures are in the data's own units (arm degrees or -100..100, g
 
 from __future__ import annotations
 
+import contextlib
+import os
 from dataclasses import dataclass
+from typing import Iterator
 
 import numpy as np
 import numpy.typing as npt
@@ -185,6 +188,8 @@ def dtw(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, Array | float]:
     """Order-preserving alignment (dynamic time warping) of predicted and GT paths.
 
     Unlike best-match, a prediction that visits the right poses in the wrong order pays for it.
+    Rollouts are processed in blocks, one thread per core: the row operations are too small for
+    torch's own threads to pay off, but whole blocks run side by side.
 
     Args:
         pred: (..., T, 6).
@@ -194,52 +199,72 @@ def dtw(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, Array | float]:
         (drift, cost): (..., T) mean distance of the GT samples aligned to each predicted sample,
         and (...,) total alignment cost divided by the path length.
     """
-    p = torch.as_tensor(np.ascontiguousarray(pred, np.float64))
-    g = torch.as_tensor(np.ascontiguousarray(gt, np.float64))
+    from concurrent.futures import ThreadPoolExecutor
+
+    p = np.ascontiguousarray(pred, np.float64)
+    g = np.ascontiguousarray(gt, np.float64)
     squeeze = p.ndim == 2
     if squeeze:
         p = p[None]
-    drifts, costs = [], []
-    for block in torch.split(p, max(1, 16_000_000 // max(1, p.shape[1] * g.shape[0])), dim=0):
-        d, c = _dtw_block(block, g)
-        drifts.append(d)
-        costs.append(c)
-    drift = torch.cat(drifts).numpy()
-    cost = torch.cat(costs).numpy()
+    block = max(1, min(256, -(-len(p) // (os.cpu_count() or 1))))
+    blocks = [p[i:i + block] for i in range(0, len(p), block)]
+    with _torch_threads(1), ThreadPoolExecutor(max_workers=min(len(blocks), os.cpu_count() or 1)) as pool:
+        results = list(pool.map(lambda b: _dtw_block(b, g), blocks))
+    drift = np.concatenate([r[0] for r in results])
+    cost = np.concatenate([r[1] for r in results])
     return (drift[0], float(cost[0])) if squeeze else (drift, cost)
 
 
-def _dtw_block(p: torch.Tensor, g: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+@contextlib.contextmanager
+def _torch_threads(n: int) -> Iterator[None]:
+    """Run a block of torch work with ``n`` intra-op threads, then restore the previous count."""
+    previous = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(previous)
+
+
+def _dtw_block(p: npt.NDArray[np.float64], g: npt.NDArray[np.float64]) -> tuple[Array, Array]:
     """DTW of a (B, T, 6) block against (G, 6), one vector operation per predicted step.
 
     Within a row, ``D[i, j] = min(a_j, c_ij + D[i, j-1])`` with ``a_j = c_ij + min(D[i-1, j-1],
     D[i-1, j])`` is a min-plus scan: with ``S`` the running sum of the row's costs,
     ``D[i, :] = S + cummin(a - S)``. So each row is a cumsum and a cummin, not a loop over j.
+    Tables are laid out (T, G, B) so every scan runs along the outer axis over contiguous rows.
+    Costs are float32 and made row by row: they only choose the path; the backtrack measures the
+    chosen cells exactly.
     """
     B, T, _ = p.shape
     G = g.shape[0]
-    # float32 costs choose the path (their ~1e-2 deg noise near zero cannot change which cells
-    # are cheapest by any margin that matters); the backtrack measures the chosen cells exactly.
-    centre = g.mean(dim=0)
-    cost = _squared_distances((p - centre).to(torch.float32), (g - centre).to(torch.float32)).sqrt_()
-    # acc[:, i + 1, j + 1] = D[i, j]; row 0 and column 0 are the boundary (inf, 0 at the origin)
-    acc = torch.empty((B, T + 1, G + 1), dtype=torch.float32)
+    centre = g.mean(axis=0)
+    pc = torch.from_numpy((p - centre).astype(np.float32)).permute(1, 0, 2).contiguous()  # (T, B, 6)
+    gc = torch.from_numpy((g - centre).astype(np.float32))  # (G, 6)
+    g_sq = (gc * gc).sum(-1)[:, None]  # (G, 1)
+    # acc[i + 1, j + 1] = D[i, j]; row 0 and column 0 are the boundary (inf, 0 at the origin)
+    acc = torch.empty((T + 1, G + 1, B), dtype=torch.float32)
+    acc[0] = float("inf")
     acc[:, 0] = float("inf")
-    acc[:, :, 0] = float("inf")
-    acc[:, 0, 0] = 0.0
-    a = torch.empty((B, G), dtype=torch.float32)
-    running = torch.empty((B, G), dtype=torch.float32)
+    acc[0, 0] = 0.0
+    cost = torch.empty((G, B), dtype=torch.float32)
+    a = torch.empty((G, B), dtype=torch.float32)
+    running = torch.empty((G, B), dtype=torch.float32)
+    argmin = torch.empty((G, B), dtype=torch.long)
     for i in range(T):
-        prev = acc[:, i]
-        torch.minimum(prev[:, :-1], prev[:, 1:], out=a)
-        a += cost[:, i]
-        torch.cumsum(cost[:, i], dim=1, out=running)
+        p_i = pc[i]  # (B, 6)
+        torch.addmm(g_sq + (p_i * p_i).sum(-1)[None], gc, p_i.T, beta=1.0, alpha=-2.0, out=cost)
+        cost.clamp_(min=0.0).sqrt_()
+        prev = acc[i]
+        torch.minimum(prev[:-1], prev[1:], out=a)
+        a += cost
+        torch.cumsum(cost, dim=0, out=running)
         a -= running
-        row = acc[:, i + 1, 1:]
-        torch.cummin(a, dim=1, out=(row, torch.empty((B, G), dtype=torch.long)))
+        row = acc[i + 1, 1:]
+        torch.cummin(a, dim=0, out=(row, argmin))
         row += running
-    drift, total, length = _dtw_backtrack(p.numpy(), g.numpy(), acc.numpy())
-    return torch.from_numpy(drift), torch.from_numpy(total / length)
+    drift, total, length = _dtw_backtrack(p, g, acc.permute(2, 0, 1).numpy())
+    return drift, total / length
 
 
 def _dtw_backtrack(p: npt.NDArray[np.float64], g: npt.NDArray[np.float64], acc: npt.NDArray[np.float32]

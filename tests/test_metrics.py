@@ -223,7 +223,7 @@ def test_sweep_equals_per_rollout_timelines(tmp_path):
         np.testing.assert_allclose(sweep.time_aligned_drift[i], tl.time_aligned_drift)
         np.testing.assert_allclose(sweep.best_match_drift[i], tl.best_match_drift)
         np.testing.assert_allclose(sweep.dtw_drift[i], tl.dtw_drift, rtol=1e-6)
-        np.testing.assert_allclose(sweep.ee_error_mm[i], tl.ee_error_mm, atol=1e-9)
+        np.testing.assert_allclose(sweep.ee_error_mm[i], tl.ee_error_mm, atol=1e-3)  # float32 FK in sweeps
         np.testing.assert_allclose(sweep.chunk_rmse[i], tl.chunk_rmse)
         assert sweep.tempo[i] == pytest.approx(tl.tempo)
         assert sweep.rmse[i] == pytest.approx(tl.chunk_errors.rmse)
