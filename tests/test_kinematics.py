@@ -107,3 +107,13 @@ def test_unit_guess_says_so():
     units, reason = guess_arm_units(np.array([[0, -104.0, 98, 60, 0, 10]]))
     assert units.guessed and units.arm == "degrees" and "degrees" in reason
     assert "(guessed)" in units.label()
+
+
+def test_link_origins_equal_full_poses_for_every_link():
+    q = np.random.default_rng(2).uniform(-1.5, 1.5, size=(50, 6))
+    fk = kinematics()
+    poses = fk.link_poses(q)
+    for link in fk.link_names[1:]:
+        np.testing.assert_allclose(fk.link_origins(q, link), poses[link][:, :3, 3], atol=1e-12)
+    with pytest.raises(ValueError, match="not in the SO-101 URDF"):
+        fk.link_origins(q, "tool0")
