@@ -1,7 +1,7 @@
 """The GT and predicted SO-101 arms in a recording: URDF trees, joint transforms, tool-point paths.
 
 Both arms come from our URDF through ``rerun.urdf.UrdfTree``: the visual meshes are swapped for
-decimated copies (:mod:`inspector.export_meshes`) and each copy gets its own robot name, entity
+decimated copies (:mod:`inspector.meshes`) and each copy gets its own robot name, entity
 prefix and frame prefix (``gt/``, ``pred/``) so the two trees never share a frame. The tree's
 geometry is logged once (static); every revolute joint's transform is then sent for all steps at
 once with ``send_columns``, computed by the tree from the joint angles, never clamped (a joint
@@ -22,7 +22,7 @@ import rerun as rr
 
 from . import export_layout as L
 from .errors import InspectorError
-from .export_meshes import decimated_mesh
+from .meshes import decimated_mesh
 from .kinematics import kinematics
 from .robot import resolved_urdf_text, urdf_path
 from .timeline import RolloutTimeline

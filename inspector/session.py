@@ -33,7 +33,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, Mapping
+from typing import Any, Callable, Literal, Mapping
 
 import numpy as np
 import numpy.typing as npt
@@ -190,14 +190,23 @@ def read_json_object(path: Path) -> dict[str, Any]:
     return data
 
 
-def open_session(root: str | Path) -> Session:
+def open_session(root: str | Path, check: Callable[[Path], None] | None = None) -> Session:
     """Read ``session.json`` and every rollout under ``rollouts/`` (bad ones go to ``errors``).
 
+    Args:
+        root: the session directory.
+        check: called with ``session.json`` and with each rollout directory before it is read;
+            an :class:`InspectorError` it raises refuses the session (for ``session.json``) or
+            that rollout (it goes to ``errors``). The app uses it to refuse symbolic links that
+            lead outside the served roots (``inspector.sources.check_confined``).
+
     Raises:
-        InspectorError: ``session.json`` itself is missing or invalid.
+        InspectorError: ``session.json`` itself is missing or invalid (or refused by ``check``).
     """
     root = Path(root)
     meta_path = root / SESSION_FILE
+    if check is not None:
+        check(meta_path)
     meta = read_json_object(meta_path)
     schema = meta.get("schema")
     require(schema == SCHEMA, meta_path, f"schema: expected {SCHEMA!r}, found {schema!r}")
@@ -231,6 +240,8 @@ def open_session(root: str | Path) -> Session:
             if child.name.startswith(".") or not child.is_dir():
                 continue  # temporary directories of a write in progress
             try:
+                if check is not None:
+                    check(child)
                 rollout = load_rollout(child, units)
                 rollout.session = session
                 session.rollouts[child.name] = rollout

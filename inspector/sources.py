@@ -3,6 +3,10 @@
 ``report``, ``serve`` and ``export`` all take such paths; they share this one function so a path
 means the same thing everywhere. Raw model output is imported into a temporary session that lives
 as long as the returned :class:`Sources`.
+
+``open_sources(..., confine=True)`` (what ``inspector serve`` uses) also refuses, before reading
+them, ``session.json`` and every rollout whose directory or any file in it resolves (through
+symbolic links) outside its session's directory: see :func:`check_confined`.
 """
 
 from __future__ import annotations
@@ -11,7 +15,7 @@ import os
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator, Sequence
+from typing import Iterable, Iterator, Sequence
 
 from .errors import InspectorError
 from .session import Rollout, Session, is_rollout, is_session, open_session
@@ -32,42 +36,55 @@ class Sources:
             for tag in sorted(session.rollouts):
                 yield session, session.rollouts[tag]
 
+    def serves(self, path: str | Path) -> bool:
+        """True when ``path`` resolves to one of ``roots`` or to something under one."""
+        return _under(Path(path).resolve(), self.roots)
+
     def close(self) -> None:
         for t in self._temps:
             t.cleanup()
         self._temps.clear()
 
 
-def open_sources(paths: Sequence[str | Path], dataset: str | Path | None = None) -> Sources:
+def open_sources(paths: Sequence[str | Path], dataset: str | Path | None = None,
+                 confine: bool = False) -> Sources:
     """Open each path as a session (a rollout path opens its session filtered to that rollout).
 
     Args:
         paths: sessions, rollout directories, or DreamZero-SO101 source directories.
         dataset: a LeRobot dataset to take GT from when a session names none.
+        confine: refuse (as rollout errors, before reading them) rollouts whose directory or any
+            file in it resolves outside the session directory; the app serves with this on.
 
     Raises:
-        InspectorError: a path is missing or is none of the above.
+        InspectorError: a path is missing or is none of the above (or, confined, its
+            ``session.json`` resolves outside the session directory).
     """
     out = Sources()
     try:
         for raw in paths:
-            _open_one(out, raw, dataset)
+            _open_one(out, raw, dataset, confine)
     except BaseException:
         out.close()  # temporary sessions of the paths already opened
         raise
     return out
 
 
-def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None) -> None:
+def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine: bool = False) -> None:
     """Open one path of :func:`open_sources` into ``out``."""
     path = Path(os.path.expanduser(raw))  # '~nosuchuser' stays as it is: not found
     if not path.exists():
         raise InspectorError(path, "not found")
     path = path.resolve()
+
+    def opened(root: Path) -> Session:
+        root = root.resolve()
+        return open_session(root, check=(lambda p: check_confined(p, [root])) if confine else None)
+
     if is_session(path):
-        session = open_session(path)
+        session = opened(path)
     elif is_rollout(path) and is_session(path.parent.parent):
-        session = open_session(path.parent.parent)
+        session = opened(path.parent.parent)
         keep = path.name
         session.rollouts = {k: v for k, v in session.rollouts.items() if k == keep}
         session.errors = {k: v for k, v in session.errors.items() if k == keep}
@@ -77,7 +94,7 @@ def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None) -> None
         find_sources(path)  # raises a clear error when there is nothing to import
         session_path, handle = load_in_memory(path, dataset=dataset)
         out._temps.append(handle)
-        session = open_session(session_path)
+        session = opened(session_path)
         out.roots.append(Path(handle.name))
     if dataset is not None and session.dataset_root is None:
         from .lerobot_dataset import find_dataset
@@ -85,3 +102,40 @@ def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None) -> None
         session.gt_source["dataset"] = str(find_dataset(dataset))
     out.sessions.append(session)
     out.roots.append(session.root.resolve())
+
+
+def check_confined(path: str | Path, roots: Iterable[str | Path]) -> None:
+    """Refuse ``path`` when it, or anything under it, resolves outside every one of ``roots``.
+
+    Every entry is resolved through its symbolic links, and the walk follows the links that stay
+    inside (each directory once), so no file reachable under ``path`` leads elsewhere. Nothing is
+    read but directory listings.
+
+    Raises:
+        InspectorError: naming the first entry at fault, e.g. ``rollouts/ep0/video/front.mp4:
+            resolves outside the served roots (to /elsewhere/front.mp4) ...``.
+    """
+    allowed = [Path(r).resolve() for r in roots]
+    seen: set[Path] = set()
+    stack = [Path(path)]
+    while stack:
+        entry = stack.pop()
+        try:
+            target = entry.resolve()
+        except (RuntimeError, OSError):  # a link loop (RuntimeError before Python 3.13): leads nowhere
+            continue
+        if not _under(target, allowed):
+            raise InspectorError(entry, f"resolves outside the served roots (to {target}); only files under "
+                                        f"{', '.join(map(str, allowed))} are served, so it is not read")
+        if target in seen or not target.is_dir():
+            continue
+        seen.add(target)
+        try:
+            names = sorted(os.listdir(entry))
+        except OSError:
+            continue  # unreadable: whoever reads it reports that
+        stack.extend(entry / name for name in reversed(names))
+
+
+def _under(path: Path, roots: Iterable[Path]) -> bool:
+    return any(path == r or path.is_relative_to(r) for r in roots)

@@ -20,11 +20,11 @@ import pytest
 import rerun as rr
 
 from inspector import export_layout as L
-from inspector import export_meshes
+from inspector import meshes
 from inspector.cli import main as cli_main
 from inspector.errors import InspectorError
 from inspector.export import TextProgress, format_size, select_views, write_recording
-from inspector.export_meshes import cluster_vertices, decimated_mesh
+from inspector.meshes import cluster_vertices, decimated_mesh
 from inspector.kinematics import kinematics
 from inspector.robot import mesh_dir
 from inspector.session import SessionWriter, open_session
@@ -414,7 +414,7 @@ def test_meshes_are_decimated_and_cached(tmp_path):
     assert len(after.faces) < len(before.faces) / 5
     np.testing.assert_allclose(after.bounds, before.bounds, atol=2e-3)  # same shape, within 2 mm
     mtime = out.stat().st_mtime_ns
-    export_meshes._decimated.cache_clear()  # a new process: found on disk, not made again
+    meshes._decimated.cache_clear()  # a new process: found on disk, not made again
     assert decimated_mesh(src, cache=tmp_path) == out and out.stat().st_mtime_ns == mtime
     assert [p.name for p in tmp_path.iterdir()] == [out.name]
 

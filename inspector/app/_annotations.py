@@ -3,7 +3,11 @@
 Several tabs (or several app processes) may write at once, so every change is a read-modify-write
 under an exclusive ``fcntl.flock`` on ``<session>/.annotations.lock``, and the file is replaced
 atomically (``write_json_atomic``): concurrent edits of different entries all survive, and a
-reader never sees half a file. A file that exists but does not parse is never overwritten.
+reader never sees half a file. A file that exists but does not parse is never overwritten. A
+writer killed mid-write leaves the previous file intact and at most a ``.annotations.json.*.tmp``
+behind; the next writer, holding the lock, removes it. An ``annotations.json`` that is a symbolic
+link leading outside the session directory is neither read nor written, and the lock file is
+never followed through a link.
 
 Layout::
 
@@ -15,6 +19,7 @@ Layout::
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import json
 import os
@@ -33,7 +38,13 @@ MAX_NOTE_CHARS = 10_000
 
 @contextlib.contextmanager
 def _locked(session_root: Path) -> Iterator[None]:
-    fd = os.open(session_root / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+    lock = session_root / LOCK_FILE
+    try:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise InspectorError(lock, "is a symbolic link; refusing to follow it") from None
+        raise
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)
         yield
@@ -42,13 +53,37 @@ def _locked(session_root: Path) -> Iterator[None]:
         os.close(fd)
 
 
+def annotations_path(session_root: str | Path) -> Path:
+    """``<session_root>/annotations.json``, checked not to lead outside the session directory.
+
+    Raises:
+        InspectorError: it is a symbolic link that resolves outside ``session_root``.
+    """
+    root = Path(session_root)
+    path = root / ANNOTATIONS_FILE
+    if path.is_symlink():
+        target, base = path.resolve(), root.resolve()
+        if not target.is_relative_to(base):
+            raise InspectorError(path, f"resolves outside the served roots (to {target}); "
+                                       "not reading or writing it")
+    return path
+
+
+def _remove_stale_temps(root: Path) -> None:
+    """Drop what writers killed mid-write left (call holding the lock: no live writer has one)."""
+    for tmp in root.glob(f".{ANNOTATIONS_FILE}.*.tmp"):
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+
+
 def read_annotations(session_root: str | Path) -> dict[str, Any]:
     """The session's annotations (an empty document when the file does not exist yet).
 
     Raises:
-        InspectorError: the file exists but is not valid annotations JSON.
+        InspectorError: the file exists but is not valid annotations JSON, or leads outside the
+            session directory.
     """
-    path = Path(session_root) / ANNOTATIONS_FILE
+    path = annotations_path(session_root)
     if not path.is_file():
         return {"schema": SCHEMA, "rollouts": {}}
     try:
@@ -86,7 +121,9 @@ def update_annotation(session_root: str | Path, tag: str, *, chunk: int | None =
     root = Path(session_root)
     if note is not None:
         note = str(note)[:MAX_NOTE_CHARS]
+    annotations_path(root)  # refuse a link out before taking the lock
     with _locked(root):
+        _remove_stale_temps(root)
         data = read_annotations(root)
         entry = data["rollouts"].setdefault(tag, {})
         target = entry if chunk is None else entry.setdefault("chunks", {}).setdefault(str(int(chunk)), {})

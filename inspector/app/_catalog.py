@@ -2,7 +2,8 @@
 
 The picker shows labels; a label maps to an :class:`Entry` in a dict built at start-up from the
 sessions under the served roots. Nothing a browser sends is ever used as a path: a name that is
-not a key of that dict is simply not found.
+not a key of that dict is simply not found. A rollout whose directory or files resolve (through
+symbolic links) outside its session directory is refused, at start-up and again when opened.
 
 Opening a rollout builds its :class:`~inspector.timeline.RolloutTimeline`, its scene arrays and
 its frame store once, behind a per-rollout lock (two tabs opening it at once wait for one build).
@@ -18,7 +19,7 @@ from pathlib import Path
 
 from ..errors import InspectorError
 from ..session import Rollout, Session
-from ..sources import Sources
+from ..sources import Sources, check_confined
 from ..timeline import RolloutTimeline, build_timeline
 from ._frames import FrameStore
 from ._scene import RolloutScene
@@ -115,6 +116,8 @@ class Catalog:
         rollout = entry.rollout
         assert rollout is not None
         try:
+            # Refused at start-up already when served; checked again in case a link appeared since.
+            check_confined(rollout.root, [entry.session.root])
             tl = build_timeline(rollout)
             scene = RolloutScene.from_timeline(tl, self._joint_links)
         except InspectorError:

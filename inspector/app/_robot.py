@@ -18,6 +18,7 @@ import warnings
 import numpy as np
 import numpy.typing as npt
 
+from ..meshes import cluster_vertices
 from ..units import JOINT_NAMES
 
 # Vertex-clustering cell [m] for the app's copies of the meshes.
@@ -56,31 +57,6 @@ def _simplify_in_place(urdf, cell_m: float) -> None:
         vertices, faces = cluster_vertices(np.asarray(mesh.vertices), np.asarray(mesh.faces), cell_m)
         if len(faces) >= 4:  # a part smaller than the grid keeps its full mesh
             urdf.scene.geometry[name] = trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
-
-
-def cluster_vertices(vertices: npt.NDArray[np.float64], faces: npt.NDArray[np.int64], cell: float
-                     ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.int32]]:
-    """Simplify a triangle mesh by merging all vertices in each ``cell``-sized grid cube.
-
-    Args:
-        vertices: (V, 3) [m]; faces: (F, 3) vertex indices.
-        cell: grid size [m].
-
-    Returns:
-        (V', 3) float32 cluster centroids and (F', 3) int32 faces; faces that collapse to an edge or
-        a point, and duplicates, are dropped; the rest keep their winding.
-    """
-    keys = np.floor(vertices / cell).astype(np.int64)
-    _, cluster, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-    cluster = cluster.ravel()
-    centroids = np.zeros((counts.size, 3))
-    np.add.at(centroids, cluster, vertices)
-    centroids /= counts[:, None]
-    f = cluster[faces]
-    keep = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
-    f = f[keep]
-    _, first = np.unique(np.sort(f, axis=1), axis=0, return_index=True)
-    return centroids.astype(np.float32), f[np.sort(first)].astype(np.int32)
 
 
 class ArmView:

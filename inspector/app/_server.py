@@ -138,7 +138,7 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
             raise InspectorError(BUNDLED_DEMO, "the bundled demo session is not built yet; build it with "
                                  "`inspector demo --rebuild`, or serve a session: `inspector serve PATH`")
         paths = [BUNDLED_DEMO]
-    sources = open_sources(paths, dataset=dataset)
+    sources = open_sources(paths, dataset=dataset, confine=True)  # no link leads out of a root
     app = InspectorApp(sources, host=host, port=port)
     n_ok = sum(len(s.rollouts) for s in sources.sessions)
     n_bad = sum(len(s.errors) for s in sources.sessions)

@@ -434,6 +434,9 @@ class TabState:
             c = self.controls
             chunk = self.chunk
             try:
+                # Only ever <served session>/annotations.json (the root comes from the catalog).
+                if not self.app.sources.serves(entry.session.root):
+                    raise InspectorError(entry.session.root, "not a served session; notes not written")
                 update_annotation(entry.session.root, entry.tag,
                                   flag=c.flag_rollout.value if rollout_flag is None else rollout_flag,
                                   note=c.note_rollout.value if rollout_note is None else rollout_note)
@@ -533,7 +536,7 @@ class TabState:
                     fn(event)
             return cb
 
-        c.picker.on_update(user(lambda e: (k := c.key_of(e.target.value)) and self.open(k)))
+        c.picker.on_update(user(lambda e: self._picked(e.target.value)))
         # Slider callbacks may run out of order on the pool: read the latest value, not the event's.
         c.chunk.on_update(user(lambda e: self._slider_moved(c.chunk)))
         c.step_in_chunk.on_update(user(lambda e: self._slider_moved(c.step_in_chunk)))
@@ -557,6 +560,16 @@ class TabState:
             ("Worst chunk", "W", self.jump_to_worst_chunk),
         ):
             gui.add_command(label, hotkey=key).on_trigger(user(lambda e, a=action: a()))
+
+    def _picked(self, option: str) -> None:
+        """The picker changed: open that rollout, or put back the open one for a name not served."""
+        key = self.controls.key_of(option)
+        if key is not None:
+            self.open(key)
+            return
+        with self.lock:
+            if self.key is not None:
+                self._set_quietly(self.controls.picker, self.controls.key_to_option[self.key])
 
     def _slider_moved(self, slider) -> None:
         with self.lock:

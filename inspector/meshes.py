@@ -1,4 +1,5 @@
-"""Decimated SO-101 meshes for ``.rrd`` files, made once and cached on disk.
+"""Simplified SO-101 meshes: vertex clustering (the app, per start) and decimated copies for
+``.rrd`` files (made once and cached on disk).
 
 The CAD meshes are tessellated far finer than a viewer needs (~480k triangles per arm, most of
 them under half a millimetre). Two passes bring an arm to ~40k triangles:
