@@ -239,8 +239,10 @@ def _dtw_block(p: npt.NDArray[np.float64], g: npt.NDArray[np.float64]) -> tuple[
     B, T, _ = p.shape
     G = g.shape[0]
     centre = g.mean(axis=0)
-    pc = torch.from_numpy((p - centre).astype(np.float32)).permute(1, 0, 2).contiguous()  # (T, B, 6)
-    gc = torch.from_numpy((g - centre).astype(np.float32))  # (G, 6)
+    # absurd inputs (1e30 deg) would overflow float32 to inf: clip, the path is measured in float64 anyway
+    limit = np.finfo(np.float32).max / 1e3
+    pc = torch.from_numpy(np.clip(p - centre, -limit, limit).astype(np.float32)).permute(1, 0, 2).contiguous()  # (T, B, 6)
+    gc = torch.from_numpy(np.clip(g - centre, -limit, limit).astype(np.float32))  # (G, 6)
     g_sq = (gc * gc).sum(-1)[:, None]  # (G, 1)
     # acc[i + 1, j + 1] = D[i, j]; row 0 and column 0 are the boundary (inf, 0 at the origin)
     acc = torch.empty((T + 1, G + 1, B), dtype=torch.float32)
