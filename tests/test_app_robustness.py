@@ -32,9 +32,9 @@ import traceback
 from pathlib import Path
 
 import pytest
-from browser import frame_sources, skip_reason, slider_thumb, wait_until
+from browser import PAGE_TIMEOUT_S, frame_sources, skip_reason, slider_thumb, wait_until
 from test_app import app, connect, key, sessions  # noqa: F401  (app and sessions are fixtures)
-from test_app_browser import browser, new_page, open_in_page, page_tab  # noqa: F401  (browser: fixture)
+from test_app_browser import browser, open_in_page, page_tab  # noqa: F401  (browser is a fixture)
 
 from inspector.app import HeadlessClient, serve
 from inspector.app._annotations import read_annotations, update_annotation
@@ -103,11 +103,9 @@ WIDTH, HEIGHT = 1024, 700  # small pages: four of them render WebGL in software
 # viser drops them with this warning (once per client). Benign, and not an error.
 @pytest.mark.filterwarnings("ignore:Queued a .* on a closed connection:UserWarning")
 def test_four_browser_pages_hold_their_own_timelines(browser, app, server_errors, capfd):  # noqa: F811
-    from browser import PAGE_TIMEOUT_S
-
     chunk, step = re.compile(r"^Chunk$"), re.compile(r"^Step$")
     # Per page: the rollout picked in its picker (None: the one it opens with), the slider it
-    # scrubs with the keyboard, how many steps right, and where that puts it (chunk, step).
+    # scrubs with the keyboard, how many steps right, and where that puts it (rollout, step).
     default = app.catalog.default_key()
     plan = [(None, chunk, 3, default, 3 * 9), ("ep000_train", chunk, 7, key(app, "ep000_train"), 7 * 9),
             ("f084", step, 4, key(app, "f084"), 4), (None, chunk, 10, default, 10 * 9)]
