@@ -68,7 +68,8 @@ class FrameStore:
         self._lock = threading.Lock()
         self._listeners: list[Callable[[], None]] = []
         self._started = False
-        self.done = threading.Event()  # every view decoded (or failed) and its PSNR computed
+        self.decoded = threading.Event()  # every clip decoded (or failed): ready to scrub
+        self.done = threading.Event()  # ... and every view's PSNR computed
 
     # -- background work ----------------------------------------------------------------------
     def start(self) -> None:
@@ -83,7 +84,9 @@ class FrameStore:
             self._started = True
             self._pending = len(self.views)
             self._halves = {v: 2 for v in self.views}  # clips still decoding per view
+            self._clips_left = 2 * len(self.views)
         if not self.views:
+            self.decoded.set()
             self.done.set()
             return
         for view in self.views:
@@ -98,6 +101,10 @@ class FrameStore:
             self.gt_status[view] = _attempt(lambda: tl.gt.clips[view].frames)  # decode now, not on a scrub
         else:
             self.gt_status[view] = "no GT video for this view"
+        with self._lock:
+            self._clips_left -= 1
+            if self._clips_left == 0:
+                self.decoded.set()
         self._notify()
         with self._lock:
             self._halves[view] -= 1

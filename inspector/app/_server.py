@@ -33,8 +33,13 @@ class InspectorApp:
     """
 
     def __init__(self, sources: Sources, host: str = "127.0.0.1", port: int = 8080) -> None:
+        import torch
         import viser
 
+        # A scrub step runs a handful of tiny tensor ops; torch's worker threads cost more to wake
+        # than they save, and spin-wait badly when the browser shares the CPU (540-pose FK: 1 ms
+        # with one thread, up to 180 ms with two on a busy 2-core machine).
+        torch.set_num_threads(1)
         self.sources = sources
         self.tabs: dict[int, TabState] = {}
         self._tabs_changed = threading.Condition()
