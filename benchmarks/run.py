@@ -128,8 +128,8 @@ def _fixture_rollout(tmp: Path):
     from inspector.session import open_session
 
     dest = tmp / "fixture"
-    if not dest.exists():
-        import_dreamzero(FIXTURES / "train_rollout" / "ep000_train", dest, log=lambda _: None)
+    if not dest.exists():  # both 60-chunk rollouts: the app opens one by default, we time the other
+        import_dreamzero(FIXTURES / "train_rollout", dest, log=lambda _: None)
     return dest, open_session(dest).rollouts["ep000_train"]
 
 
@@ -144,7 +144,13 @@ def _app_tab(tmp: Path) -> Iterator[tuple[object, object]]:
     try:
         with HeadlessClient(app.port):
             tab = app.wait_for_tabs(1)[0]
-            yield tab, next(k for k in app.catalog.keys() if k.endswith("ep000_train"))
+            key = next(k for k in app.catalog.keys() if k.endswith("ep000_train"))
+            # a new tab opens the default rollout (ep000_novel) at once: let it settle first,
+            # so the figure times opening a rollout that nothing has touched yet
+            assert tab.key != key
+            if tab.loaded is not None:
+                tab.loaded.frames.done.wait(timeout=60)
+            yield tab, key
     finally:
         app.stop()
 

@@ -78,7 +78,8 @@ def decode(path: str | Path, start_s: float | None = None, end_s: float | None =
     path = Path(path)
     if not path.is_file():
         raise InspectorError(path, "video file not found")
-    frames: list[npt.NDArray[np.uint8]] = []
+    buffer: npt.NDArray[np.uint8] | None = None
+    extra: list[npt.NDArray[np.uint8]] = []
     times: list[float] = []
     # half a frame of slack: container timestamps are rounded to the time base
     try:
@@ -88,6 +89,8 @@ def decode(path: str | Path, start_s: float | None = None, end_s: float | None =
             # One reformatter for the clip: it keeps its swscale context, where frame.to_ndarray()
             # builds a new one per frame (4x the cost of decoding at these sizes).
             reformatter = VideoReformatter()
+            # a window (one episode of a multi-episode file) holds an unknown share of the frames
+            expected = int(stream.frames or 0) if start_s is None and end_s is None else 0
             fps = float(stream.average_rate or 30)
             slack = 0.5 / fps
             if start_s is not None and start_s > 1.0:
@@ -102,14 +105,29 @@ def decode(path: str | Path, start_s: float | None = None, end_s: float | None =
                 width, height = size if size is not None else (frame.width, frame.height)
                 rgb = reformatter.reformat(frame, width=width, height=height, format="rgb24",
                                            interpolation="AREA")
-                frames.append(rgb.to_ndarray())
+                image = rgb.to_ndarray()
+                n = len(times)
+                if n == 0 and expected > 0:
+                    # the container's frame count sizes the clip once: no list + stack copy,
+                    # which would hold every clip twice at its peak
+                    buffer = np.empty((expected, *image.shape), np.uint8)
+                if buffer is not None and n < len(buffer):
+                    buffer[n] = image
+                else:
+                    extra.append(image)  # more frames than the container announced
                 times.append(t)
     except Exception as exc:
         raise InspectorError(path, f"cannot decode video ({type(exc).__name__}: {exc})") from None
-    if not frames:
+    if not times:
         raise InspectorError(path, "video has no decodable frames"
                              + (f" in [{start_s:.3f}, {end_s:.3f}) s" if start_s is not None else ""))
-    return np.stack(frames), np.asarray(times)
+    if buffer is None:
+        frames = np.stack(extra)
+    elif extra:
+        frames = np.concatenate([buffer, np.stack(extra)])
+    else:
+        frames = buffer[: len(times)]
+    return frames, np.asarray(times)
 
 
 class VideoClip:
