@@ -148,6 +148,9 @@ def _app_tab(tmp: Path) -> Iterator[tuple[object, object]]:
             # a new tab opens the default rollout (ep000_novel) at once: let it settle first,
             # so the figure times opening a rollout that nothing has touched yet
             assert tab.key != key
+            deadline = time.time() + 60
+            while tab.loaded is None and tab.error is None and time.time() < deadline:
+                time.sleep(0.05)
             if tab.loaded is not None:
                 tab.loaded.frames.done.wait(timeout=60)
             yield tab, key
@@ -160,11 +163,15 @@ def bench_open(tmp: Path, quick: bool) -> Figure:
     from inspector.timeline import build_timeline
 
     _, rollout = _fixture_rollout(tmp)
-    with _app_tab(tmp) as (tab, key):
-        start = time.perf_counter()
-        tab.open(key)
-        tab.loaded.frames.decoded.wait(timeout=60)  # every frame of every view on hand
-        ours = time.perf_counter() - start
+
+    def open_untouched() -> float:
+        with _app_tab(tmp) as (tab, key):  # a fresh app: nothing of that rollout loaded yet
+            start = time.perf_counter()
+            tab.open(key)
+            tab.loaded.frames.decoded.wait(timeout=60)  # every frame of every view on hand
+            return time.perf_counter() - start
+
+    ours = min(open_untouched() for _ in range(1 if quick else 3))
 
     def naive() -> None:  # one thread, full-size GT decoded then resized in numpy
         from inspector.metrics import resize_frames
