@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import re
+import time
 from pathlib import Path
 
 import pytest
@@ -137,12 +138,27 @@ def test_play_button_and_step_keys(browser, app):
     page.close()
 
 
+def _settled_frames(page, timeout_s: float = 30.0) -> dict[str, str]:
+    """The video panel's frames once two looks 0.5 s apart agree."""
+    deadline = time.time() + timeout_s
+    before = frame_sources(page)
+    while time.time() < deadline:
+        page.wait_for_timeout(500)
+        now = frame_sources(page)
+        if now == before and now:
+            return now
+        before = now
+    raise AssertionError("the video panel kept changing")
+
+
 def test_two_pages_hold_independent_timelines(browser, app):
     p1, t1 = new_page(browser, app)
     p2, t2 = new_page(browser, app)
     open_in_page(p1, t1, app, "ep000_train")
     open_in_page(p2, t2, app, "ep000_train")
-    frames2 = frame_sources(p2)
+    # compare settled frames: until decoding ends, the panel changes from "loading" on its own
+    assert t2.loaded.frames.done.wait(timeout=60)
+    frames2 = _settled_frames(p2)
     slider_thumb(p1, re.compile(r"^Chunk$")).focus()
     p1.keyboard.press("End")
     wait_until(lambda: t1.chunk == t1.loaded.timeline.n_chunks - 1, what="page 1 at the last chunk")
