@@ -162,3 +162,14 @@ def test_cli_info_json_session_and_dataset(imported_session, fixtures_dir):
     assert info["cameras"] == ["front", "wrist"] and info["robot_type"] == "so101_follower"
     assert [e["length"] for e in info["episodes"]] == [150, 210, 240]
     assert info["episodes"][2]["task"] == "Put the red cube on top of the blue cube"
+
+
+def test_every_public_name_resolves():
+    import inspector
+
+    assert len(inspector.__all__) >= 8
+    for name in inspector.__all__:
+        value = getattr(inspector, name)
+        assert name == "JOINT_NAMES" or value.__name__ == name
+    with pytest.raises(AttributeError):
+        inspector.not_a_name  # noqa: B018
