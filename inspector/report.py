@@ -12,12 +12,17 @@ from .timeline import RolloutTimeline, build_timeline
 from .units import JOINT_NAMES
 
 
+def _in_episode(tl: RolloutTimeline, series: np.ndarray) -> np.ndarray:
+    """The samples of a (T,) series before the real episode's end (all of them if none are)."""
+    inside = series if tl.post_episode is None else series[~tl.post_episode]
+    return inside if inside.size else series
+
+
 def _drift_summary(tl: RolloutTimeline, series: np.ndarray | None) -> dict[str, Any] | None:
     """mean / final over in-episode samples, plus the per-chunk means (all samples)."""
     if series is None:
         return None
-    inside = series if tl.post_episode is None else series[~tl.post_episode]
-    inside = inside if inside.size else series
+    inside = _in_episode(tl, series)
     per_chunk = tl.per_chunk(series)
     return {"mean": float(inside.mean()), "final": float(inside[-1]),
             "per_chunk": [round(float(v), 6) for v in per_chunk]}
@@ -34,8 +39,7 @@ def rollout_summary(tl: RolloutTimeline) -> dict[str, Any]:
         post_chunks = 0
     ee = None
     if tl.ee_error_mm is not None:
-        inside = tl.ee_error_mm[~tl.post_episode] if tl.post_episode is not None else tl.ee_error_mm
-        inside = inside if inside.size else tl.ee_error_mm
+        inside = _in_episode(tl, tl.ee_error_mm)
         ee = {"mean": float(inside.mean()), "final": float(inside[-1])}
     psnr = {view: vm.mean_psnr_db for view, vm in tl.all_video_metrics().items()
             if vm.mean_psnr_db is not None}

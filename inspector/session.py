@@ -105,15 +105,15 @@ class Rollout:
     def has_gt_joints(self) -> bool:
         return self.gt_actions is not None
 
-    def executed_actions(self) -> npt.NDArray[np.float64]:
-        """(n_steps, 6) the actions that run, chained chunk after chunk.
+    @property
+    def steps_per_chunk(self) -> int:
+        """Timeline steps each chunk covers: an autoregressive rollout executes the first
+        ``executed_per_chunk`` actions of each chunk; a single chunk is judged on its whole horizon."""
+        return self.horizon if self.kind == "single_chunk" else self.executed_per_chunk
 
-        An autoregressive rollout executes the first ``executed_per_chunk`` actions of each chunk;
-        a single-chunk rollout is judged on its whole horizon.
-        """
-        if self.kind == "single_chunk":
-            return self.actions.reshape(-1, self.actions.shape[-1])
-        return self.actions[:, : self.executed_per_chunk].reshape(-1, self.actions.shape[-1])
+    def executed_actions(self) -> npt.NDArray[np.float64]:
+        """(n_steps, 6) the actions that run, chained chunk after chunk (see :attr:`steps_per_chunk`)."""
+        return self.actions[:, : self.steps_per_chunk].reshape(-1, self.actions.shape[-1])
 
     def video_path(self, view: str, gt: bool = False) -> Path:
         base = self.root / GT_DIR / VIDEO_DIR if gt else self.root / VIDEO_DIR

@@ -106,20 +106,16 @@ class RolloutTimeline:
 
     def step_of(self, chunk: int, step_in_chunk: int) -> int:
         """Global step of ``step_in_chunk`` in ``chunk`` (clamped to the timeline)."""
-        return int(np.clip(chunk * self._steps_per_chunk + step_in_chunk, 0, self.n_steps - 1))
-
-    @property
-    def _steps_per_chunk(self) -> int:
-        return self.horizon if self.kind == "single_chunk" else self.executed_per_chunk
+        return int(np.clip(chunk * self.steps_per_chunk + step_in_chunk, 0, self.n_steps - 1))
 
     @property
     def steps_per_chunk(self) -> int:
         """Steps of the timeline each chunk covers (executed steps; the horizon for single chunks)."""
-        return self._steps_per_chunk
+        return self.rollout.steps_per_chunk
 
     def frame_index(self, step: int) -> int:
         """Imagined frame showing ``step``."""
-        chunk, within = divmod(step, self._steps_per_chunk)
+        chunk, within = divmod(step, self.steps_per_chunk)
         r = self.rollout
         per_chunk_frames = r.frames_per_chunk
         f = chunk * per_chunk_frames + int(within * per_chunk_frames / max(1, r.executed_per_chunk))
@@ -130,12 +126,12 @@ class RolloutTimeline:
         r = self.rollout
         f = np.arange(n_frames)
         chunk, within = np.divmod(f, r.frames_per_chunk)
-        step = chunk * self._steps_per_chunk + (within * r.executed_per_chunk) // r.frames_per_chunk
+        step = chunk * self.steps_per_chunk + (within * r.executed_per_chunk) // r.frames_per_chunk
         return np.minimum(step, self.n_steps - 1)
 
     def per_chunk(self, series: npt.ArrayLike | None) -> Array | None:
         """(N,) mean of a (T,) series over each chunk's steps."""
-        return None if series is None else metrics.chunk_mean(series, self._steps_per_chunk)
+        return None if series is None else metrics.chunk_mean(series, self.steps_per_chunk)
 
     def worst_chunk(self) -> int:
         """The chunk with the largest drift (time-aligned, else limit violations, else 0)."""
@@ -220,7 +216,7 @@ def build_timeline(rollout: Rollout, dataset_root: Path | None = None,
     units = rollout.units
     pred = rollout.executed_actions()
     n_steps = pred.shape[0]
-    steps_per_chunk = rollout.horizon if rollout.kind == "single_chunk" else rollout.executed_per_chunk
+    steps_per_chunk = rollout.steps_per_chunk
     limits = limits_in_units(units)
     fk = kinematics()
     tl = RolloutTimeline(

@@ -76,7 +76,7 @@ class RolloutScene:
         links = tuple(joint_links[j] for j in JOINT_NAMES)
         poses = fk.link_poses(q_pred, links=links)
         joint_pos = np.stack([poses[link][:, :3, 3] for link in links], axis=1)
-        executed = h if tl.kind == "single_chunk" else tl.executed_per_chunk
+        executed = min(h, tl.steps_per_chunk)
         return cls(
             q_pred=q_pred,
             q_gt=None if tl.gt_aligned is None else to_radians(tl.gt_aligned, tl.units),

@@ -30,9 +30,10 @@ import numpy as np
 import numpy.typing as npt
 
 from ..session import SessionWriter
+from ..sources import BUNDLED_DEMO
 from ..units import JOINT_NAMES, Units
 
-DEMO_DIR = Path(__file__).resolve().parents[2] / "sessions" / "demo"
+DEMO_DIR = BUNDLED_DEMO  # what `inspector serve` opens with no path
 DATASET_DIR = "dataset"  # inside the session directory, so the demo travels as one folder
 HORIZON, EXECUTED, FPS = 24, 9, 30.0
 SEED = 101
