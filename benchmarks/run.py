@@ -1,10 +1,17 @@
-"""Speed figures of inspector, each with a naive baseline measured in the same run.
+"""Speed and memory of inspector as users run it, each beside a naive baseline measured in the same run.
 
-    python benchmarks/run.py [--quick] [--json FILE]
+    python benchmarks/run.py [--quick] [--json FILE] [--only NAME...]
 
-Prints a markdown table: figure, ours, naive baseline, ratio (baseline / ours: how many times
-faster), target, ok. Absolute times drift on a shared machine; the ratios, measured back to back,
-are what to compare between runs. ``--quick`` uses fewer repetitions (under a minute).
+The command-line figures time the ``inspector`` command as a whole process (start to exit) and
+take the peak of the summed RSS of its process tree (workers included), sampled every 20 ms;
+each gets a fresh metrics cache unless the figure is about the cache. Baselines
+(``benchmarks/naive.py``) run as processes too; where a naive run would take the machine down,
+it runs on two smaller subsets and its time and memory are extrapolated along the line through
+them (the table says so). The app's per-step figures (open, scrub) are server-side, in process.
+
+Prints a markdown table: figure, ours (time, peak RSS), naive baseline, ratio (baseline / ours),
+target, ok. Absolute times drift on a shared machine; ratios measured back to back are what to
+compare between runs. ``--quick`` uses fewer repetitions and smaller counts (a few minutes).
 """
 
 from __future__ import annotations
@@ -13,43 +20,113 @@ import argparse
 import contextlib
 import json
 import os
+import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
+import uuid
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 FIXTURES = REPO.parent / "shared" / "fixtures" / "dreamzero_so101"
 DEMO = REPO / "sessions" / "demo"
+NAIVE = Path(__file__).resolve().parent / "naive.py"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from eval_session import make_eval_session  # noqa: E402
 
 
 @dataclass
 class Figure:
     name: str
     ours: float
-    baseline: float | None
-    ratio: float | None
-    target: str
     unit: str
-    ok: bool | None
+    target: str
+    ok: bool
+    ours_rss_mib: float | None = None
+    baseline: float | None = None
+    baseline_rss_mib: float | None = None
+    note: str = ""
+
+    @property
+    def ratio(self) -> float | None:
+        if self.baseline is None or not self.ours:
+            return None
+        # a rate (higher is better) divides the other way round
+        return self.ours / self.baseline if self.unit.endswith("/s") else self.baseline / self.ours
 
 
-def _best_of(fn: Callable[[], object], repeat: int) -> float:
-    """Fastest of ``repeat`` runs [s] (the least disturbed by other work on the machine)."""
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
+@dataclass
+class Measured:
+    wall_s: float
+    peak_mib: float
+    stdout: str
+
+
+def run_process(args: Sequence[str], env: dict[str, str] | None = None, timeout: float = 1800) -> Measured:
+    """Run a command to its end: wall time and the peak summed RSS of its process tree."""
+    import psutil
+
+    start = time.perf_counter()
+    proc = subprocess.Popen(list(args), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, **(env or {})})
+    peak = _sample_peak_rss(proc, lambda: proc.poll() is not None, timeout)
+    out, err = proc.communicate()
+    wall = time.perf_counter() - start
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(map(str, args))} exited {proc.returncode}: {err[-2000:]}")
+    return Measured(wall, peak / 2**20, out)
+
+
+def _sample_peak_rss(proc: subprocess.Popen, done: Callable[[], bool], timeout: float) -> int:
+    import psutil
+
+    root = psutil.Process(proc.pid)
+    peak = 0
+    deadline = time.monotonic() + timeout
+    while not done():
+        if time.monotonic() > deadline:
+            proc.kill()
+            raise TimeoutError(f"pid {proc.pid} still running after {timeout} s")
+        total = 0
+        try:
+            for p in [root, *root.children(recursive=True)]:
+                with contextlib.suppress(psutil.Error):
+                    total += p.memory_info().rss
+        except psutil.Error:
+            pass
+        peak = max(peak, total)
+        time.sleep(0.02)
+    return peak
+
+
+def inspector_cmd(*args: str) -> list[str]:
+    return [sys.executable, "-m", "inspector", *map(str, args)]
+
+
+def fresh_cache(tmp: Path) -> dict[str, str]:
+    """Environment for a process that starts with an empty metrics cache."""
+    return {"INSPECTOR_CACHE_DIR": str(tmp / f"cache-{uuid.uuid4().hex[:8]}")}
+
+
+def extrapolate(measure: Callable[[int], Measured], n_small: int, n_large: int, n: int) -> tuple[float, float]:
+    """(time, peak MiB) at ``n``, on the line through the measurements at two subset sizes."""
+    a, b = measure(n_small), measure(n_large)
+
+    def line(ya: float, yb: float) -> float:
+        return yb + (yb - ya) / (n_large - n_small) * (n - n_large)
+
+    return line(a.wall_s, b.wall_s), line(a.peak_mib, b.peak_mib)
 
 
 # ----------------------------------------------------------------------------------------------
+# Kinematics (in process: a library figure)
 
 
 def bench_fk(quick: bool) -> list[Figure]:
@@ -81,120 +158,169 @@ def bench_fk(quick: bool) -> list[Figure]:
     base_tool = _best_of(lambda: loop([GRIPPER_FRAME]), 2) / m
     base_all = _best_of(lambda: loop(fk.link_names), 2) / m
     return [
-        Figure("fk", 1.0 / tool, 1.0 / base_tool, base_tool / tool, ">= 1e6 /s and >= 50x",
-               "configurations/s", 1.0 / tool >= 1e6 and base_tool / tool >= 50),
-        Figure("fk_all_links", 1.0 / all_links, 1.0 / base_all, base_all / all_links, ">= 50x",
-               "configurations/s", base_all / all_links >= 50),
+        Figure("fk", 1.0 / tool, "configurations/s", ">= 1e6 /s and >= 50x",
+               1.0 / tool >= 1e6 and base_tool / tool >= 50, baseline=1.0 / base_tool),
+        Figure("fk_all_links", 1.0 / all_links, "configurations/s", ">= 50x", base_all / all_links >= 50,
+               baseline=1.0 / base_all),
     ]
 
 
-def bench_metrics_1000(quick: bool) -> Figure:
-    """All joint-space metrics for 1,000 rollouts (60x24x6 vs a 600-frame GT), batched vs a Python loop."""
-    from inspector import metrics
-    from inspector.kinematics import kinematics
-    from inspector.sweep import sweep_metrics
-    from inspector.units import Units, limits_in_units
-
-    rng = np.random.default_rng(0)
-    t = np.linspace(0, 1, 600)[:, None]
-    gt = np.array([0, -60, 60, 40, 0, 30]) + 30 * np.sin(np.pi * t * rng.uniform(0.5, 1, 6))
-    n = 1000
-    chunks = gt[np.minimum(np.arange(60)[:, None] * 9 + np.arange(24)[None], 599)][None] \
-        + rng.normal(scale=2.0, size=(n, 60, 24, 6)).cumsum(axis=1) * 0.1
-    ours = _best_of(lambda: sweep_metrics(chunks, gt), 1)
-
-    fk = kinematics()
-    limits = limits_in_units(Units())
-    subset = 3 if quick else 5
-
-    def naive() -> None:  # per-timestep Python loop: what a first script would do
-        for b in range(subset):
-            pred = chunks[b, :, :9].reshape(-1, 6)
-            for k, p in enumerate(pred):
-                g = gt[min(k, len(gt) - 1)]
-                np.linalg.norm(p - g)
-                np.linalg.norm(gt - p, axis=1).min()
-                fk.gripper_positions(p[None], Units())
-                metrics.limit_violations(p, limits)
-            metrics.dtw(pred, gt)
-
-    base = _best_of(naive, 1) / subset * n
-    return Figure("metrics_1000", ours, base, base / ours, "< 5 s", "s", ours < 5.0)
+def _best_of(fn: Callable[[], object], repeat: int) -> float:
+    """Fastest of ``repeat`` runs [s] (the least disturbed by other work on the machine)."""
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return min(times)
 
 
-def _fixture_rollout(tmp: Path):
-    """The 60-chunk fixture rollout with three views, imported into a session."""
+# ----------------------------------------------------------------------------------------------
+# inspector report (whole processes)
+
+
+def bench_report(tmp: Path, quick: bool) -> list[Figure]:
+    """``inspector report``: the demo, 1,000 rollouts without video, 200 with two views (cold,
+    then warm from the metrics cache)."""
+    n_many, n_video = (300, 60) if quick else (1000, 200)
+    many = _eval_session(tmp, "many", n_many, video=False)
+    video = _eval_session(tmp, "video", n_video, video=True)
+    figures = []
+
+    demo = run_process(inspector_cmd("report", DEMO, "--json"), env=fresh_cache(tmp))
+    naive_demo = run_process([sys.executable, NAIVE, "report", DEMO])
+    figures.append(Figure("report_demo", demo.wall_s, "s", "< 5 s and < 1 GB",
+                          demo.wall_s < 5 and demo.peak_mib < 1024, demo.peak_mib,
+                          naive_demo.wall_s, naive_demo.peak_mib))
+
+    ours = run_process(inspector_cmd("report", many, "--json"), env=fresh_cache(tmp))
+    naive_t, naive_m = extrapolate(lambda k: run_process([sys.executable, NAIVE, "report", many, "-n", str(k)]),
+                                   25, 50, n_many)
+    figures.append(Figure(f"report_{n_many}", ours.wall_s, "s", "< 10 s and < 1 GB",
+                          ours.wall_s < 10 and ours.peak_mib < 1024, ours.peak_mib, naive_t, naive_m,
+                          "naive extrapolated from 25 and 50 rollouts"))
+
+    env = fresh_cache(tmp)
+    cold = run_process(inspector_cmd("report", video, "--json"), env=env)
+    naive_t, naive_m = extrapolate(lambda k: run_process([sys.executable, NAIVE, "report", video, "-n", str(k)]),
+                                   5, 10, n_video)
+    figures.append(Figure(f"report_{n_video}_video", cold.wall_s, "s", "< 60 s and < 1.5 GB",
+                          cold.wall_s < 60 and cold.peak_mib < 1536, cold.peak_mib, naive_t, naive_m,
+                          "two 540-frame views each; naive extrapolated from 5 and 10 rollouts"))
+    warm = run_process(inspector_cmd("report", video, "--json"), env=env)
+    figures.append(Figure(f"report_{n_video}_video_warm", warm.wall_s, "s", ">= 10x faster than cold",
+                          cold.wall_s / warm.wall_s >= 10, warm.peak_mib, cold.wall_s, cold.peak_mib,
+                          "second run, metrics cache; baseline = the cold run"))
+    if json.loads(warm.stdout) != json.loads(cold.stdout):
+        raise AssertionError("the warm report differs from the cold one")
+    return figures
+
+
+def _eval_session(tmp: Path, name: str, n: int, video: bool) -> Path:
+    dest = tmp / name
+    if not dest.exists():
+        make_eval_session(dest, n, video=video)
+    return dest
+
+
+# ----------------------------------------------------------------------------------------------
+# inspector export (whole process)
+
+
+def _fixture_session(tmp: Path) -> Path:
+    """Both 60-chunk fixture rollouts (three views each), imported into a session once."""
     from inspector.importers.dreamzero_so101 import import_dreamzero
-    from inspector.session import open_session
 
     dest = tmp / "fixture"
-    if not dest.exists():  # both 60-chunk rollouts: the app opens one by default, we time the other
+    if not dest.exists():
         import_dreamzero(FIXTURES / "train_rollout", dest, log=lambda _: None)
-    return dest, open_session(dest).rollouts["ep000_train"]
+    return dest
+
+
+def bench_export(tmp: Path, quick: bool) -> list[Figure]:
+    """The 60-chunk fixture rollout with three views to .rrd, cold (empty caches), vs decoding the
+    clips and logging one image per frame."""
+    session = _fixture_session(tmp)
+    out = tmp / "export.rrd"
+    runs = [run_process(inspector_cmd("export", session, "--rollout", "ep000_train", "-o", out),
+                        env=fresh_cache(tmp)) for _ in range(1 if quick else 2)]
+    ours = min(runs, key=lambda m: m.wall_s)
+    size_mb = out.stat().st_size / 1e6
+    naive = run_process([sys.executable, NAIVE, "export", session, "ep000_train", tmp / "naive.rrd"])
+    naive_mb = (tmp / "naive.rrd").stat().st_size / 1e6
+    return [Figure("export", ours.wall_s, "s", "< 3 s and < 700 MB",
+                   ours.wall_s < 3 and ours.peak_mib < 700, ours.peak_mib, naive.wall_s, naive.peak_mib,
+                   "whole process, empty metrics cache"),
+            Figure("export_size", size_mb, "MB", "< 10 MB", size_mb < 10, baseline=naive_mb)]
+
+
+# ----------------------------------------------------------------------------------------------
+# The app
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
 
 
 @contextlib.contextmanager
-def _app_tab(tmp: Path) -> Iterator[tuple[object, object]]:
-    """The app serving the fixture session, with one headless tab connected: yields (tab, rollout key)."""
+def _app_tab(session: Path) -> Iterator[tuple[object, str]]:
+    """The app (in process) serving ``session`` with one headless tab: yields (tab, a key the tab
+    has not opened yet, after its default rollout has settled)."""
     from inspector.app import HeadlessClient, InspectorApp
+    from inspector.cache import MetricsCache
     from inspector.sources import open_sources
 
-    session_dir, _ = _fixture_rollout(tmp)
-    app = InspectorApp(open_sources([session_dir]), port=_free_port())
+    app = InspectorApp(open_sources([session]), port=_free_port(), metrics_cache=MetricsCache(enabled=False))
     try:
         with HeadlessClient(app.port):
             tab = app.wait_for_tabs(1)[0]
             key = next(k for k in app.catalog.keys() if k.endswith("ep000_train"))
-            # a new tab opens the default rollout (ep000_novel) at once: let it settle first,
-            # so the figure times opening a rollout that nothing has touched yet
             assert tab.key != key
-            deadline = time.time() + 60
-            while tab.loaded is None and tab.error is None and time.time() < deadline:
-                time.sleep(0.05)
             if tab.loaded is not None:
-                tab.loaded.frames.done.wait(timeout=60)
+                tab.loaded.frames.done.wait(timeout=120)
             yield tab, key
     finally:
         app.stop()
 
 
 def bench_open(tmp: Path, quick: bool) -> Figure:
-    """A 60-chunk rollout with its GT and three views ready to scrub, through the app's own path."""
-    from inspector.timeline import build_timeline
-
-    _, rollout = _fixture_rollout(tmp)
+    """A 60-chunk rollout with its GT and three views ready to scrub (every frame in the cache),
+    through the app's own path, vs one thread decoding every clip whole."""
+    session = _fixture_session(tmp)
 
     def open_untouched() -> float:
-        with _app_tab(tmp) as (tab, key):  # a fresh app: nothing of that rollout loaded yet
+        with _app_tab(session) as (tab, key):  # a fresh app: nothing of that rollout loaded yet
             start = time.perf_counter()
             tab.open(key)
-            tab.loaded.frames.decoded.wait(timeout=60)  # every frame of every view on hand
+            tab.loaded.frames.decoded.wait(timeout=120)
             return time.perf_counter() - start
 
     ours = min(open_untouched() for _ in range(1 if quick else 3))
 
-    def naive() -> None:  # one thread, full-size GT decoded then resized in numpy
-        from inspector.metrics import resize_frames
+    def naive() -> None:
         from inspector.session import load_rollout
-        from inspector.video import decode
+        from inspector.timeline import build_timeline
 
-        r = load_rollout(rollout.root)
+        r = load_rollout(session / "rollouts" / "ep000_train")
         build_timeline(r)
         for view in r.views:
-            pred, _ = decode(r.video_path(view))
-            gt_frames, _ = decode(r.video_path(view, gt=True))
-            resize_frames(gt_frames, *pred.shape[1:3])
+            r.video(view).decode()
+            r.video(view, gt=True).decode()
 
     base = _best_of(naive, 1)
-    return Figure("open", ours, base, base / ours, "< 1.5 s", "s", ours < 1.5)
+    return Figure("open", ours, "s", "< 1.5 s", ours < 1.5, baseline=base,
+                  note="server side, in process")
 
 
 def bench_scrub(tmp: Path, quick: bool) -> Figure:
     """One scrub step server-side (FK, both arms, video frames, plot cursor): median of 200."""
-    _, rollout = _fixture_rollout(tmp)
-    with _app_tab(tmp) as (tab, key):
+    session = _fixture_session(tmp)
+    with _app_tab(session) as (tab, key):
         tab.open(key)
-        tab.loaded.frames.done.wait(timeout=60)
+        tab.loaded.frames.done.wait(timeout=120)
+        rollout = tab.loaded.timeline.rollout
         rng = np.random.default_rng(0)
         steps = rng.integers(0, tab.loaded.timeline.n_steps, size=60 if quick else 200)
         times = []
@@ -204,122 +330,99 @@ def bench_scrub(tmp: Path, quick: bool) -> Figure:
             times.append(time.perf_counter() - t)
         ours = float(np.median(times))
 
-    # baseline: the same frames decoded from the file on every step (seek + decode)
-    import av
-
-    def decode_at(path: Path, index: int) -> None:
-        with av.open(str(path)) as c:
-            stream = c.streams.video[0]
-            c.seek(int(index / 30.0 / stream.time_base), stream=stream, backward=True)
-            for frame in c.decode(stream):
-                if frame.pts * stream.time_base >= index / 30.0 - 1e-3:
-                    frame.to_ndarray(format="rgb24")
-                    break
-
-    clips = [rollout.video_path(v) for v in rollout.views] + [rollout.video_path(v, gt=True) for v in rollout.gt_views]
+    # baseline: the same frames decoded from the files on every step (seek + decode)
+    clips = [rollout.video(v) for v in rollout.views] + [rollout.video(v, gt=True) for v in rollout.gt_views]
     base_times = []
     for s in steps[:20]:
         t = time.perf_counter()
-        for path in clips:
-            decode_at(path, int(s))
+        for clip in clips:
+            clip.frame(int(s))
         base_times.append(time.perf_counter() - t)
     base = float(np.median(base_times))
-    return Figure("scrub", ours * 1e3, base * 1e3, base / ours, "median < 15 ms", "ms", ours < 0.015)
+    return Figure("scrub", ours * 1e3, "ms", "median < 15 ms", ours < 0.015, baseline=base * 1e3,
+                  note="server side, in process")
 
 
-def bench_export(tmp: Path, quick: bool) -> list[Figure]:
-    """The 60-chunk rollout with three views to .rrd, vs one rr.log per frame with images."""
-    import rerun as rr
-
-    from inspector.export import write_recording
-    from inspector.timeline import build_timeline
-
-    from inspector.session import load_rollout
-
-    _, rollout = _fixture_rollout(tmp)
-    out = tmp / "export.rrd"
-
-    def ours_once() -> None:
-        # read from disk each time: nothing decoded or cached beforehand, as in `inspector export`
-        write_recording(build_timeline(load_rollout(rollout.root)), out)
-
-    ours = _best_of(ours_once, 1 if quick else 2)
-    size_mb = out.stat().st_size / 1e6
-
-    # Naive: decode the same clips, then one rr.log per frame with the imagined and GT images.
-    # Logging is timed on the first 60 frames and scaled to the clip lengths.
-    fresh = load_rollout(rollout.root)
-    t = time.perf_counter()
-    clips = {(v, gt): fresh.video(v, gt=gt).frames for v in fresh.views for gt in (False, True)}
-    decode_s = time.perf_counter() - t
-    n = 60
-
-    def naive() -> None:
-        rec = rr.RecordingStream("naive")
-        rec.save(str(tmp / "naive.rrd"))
-        for f in range(n):
-            rec.set_time("frame", sequence=f)
-            for (view, gt), frames in clips.items():
-                rec.log(f"video/{view}/{'gt' if gt else 'imagined'}", rr.Image(frames[f]))
-        rec.flush()
-        rec.disconnect()
-
-    total_frames = sum(len(frames) for frames in clips.values())
-    per_frame_sets = total_frames / (n * len(clips))
-    base = decode_s + _best_of(naive, 1) * per_frame_sets
-    naive_mb = (tmp / "naive.rrd").stat().st_size / 1e6 * per_frame_sets
-    return [Figure("export", ours, base, base / ours, "< 3 s", "s", ours < 3.0),
-            Figure("export_size", size_mb, naive_mb, naive_mb / size_mb, "< 10 MB", "MB", size_mb < 10.0)]
-
-
-def bench_memory(tmp: Path, quick: bool) -> Figure:
-    """Peak RSS of ``inspector serve`` on the demo with one client that opens a rollout."""
+@contextlib.contextmanager
+def _serve(args: Sequence[str], env: dict[str, str]) -> Iterator[tuple[subprocess.Popen, int]]:
     port = _free_port()
-    target = [str(DEMO)] if DEMO.exists() else [str(_fixture_rollout(tmp)[0])]
-    proc = subprocess.Popen([sys.executable, "-m", "inspector", "serve", *target, "--port", str(port)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(inspector_cmd("serve", *args, "--port", str(port)), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, env={**os.environ, **env})
     try:
-        from inspector.app import HeadlessClient
-
-        _wait_port(port, 60)
-        with HeadlessClient(port):
-            time.sleep(8 if quick else 15)  # the tab opens the default rollout and decodes its video
-        peak_kb = _peak_rss_kb(proc.pid)
+        deadline = time.monotonic() + 60
+        while True:
+            with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), timeout=1):
+                break
+            if time.monotonic() > deadline or proc.poll() is not None:
+                raise RuntimeError("inspector serve did not start")
+            time.sleep(0.2)
+        yield proc, port
     finally:
         proc.terminate()
-        proc.wait(timeout=20)
-    return Figure("memory", peak_kb / 1024, None, None, "report only", "MiB peak RSS", None)
+        proc.wait(timeout=30)
+
+
+def _open_rollouts(port: int, n: int) -> float:
+    """Open ``n`` rollouts one after another in one headless tab, each until its frames show."""
+    from inspector.app import HeadlessClient
+
+    start = time.perf_counter()
+    with HeadlessClient(port, observe=True) as client:
+        picker = client.wait_for_control("Rollout", timeout=120)
+        options = client.control(picker)["props"]["options"]
+        for option in options[:n]:
+            client.set_gui_value(picker, option)
+            tag = option.split(" / ")[-1]
+            client.wait_until(lambda: _shows(client, tag), timeout=120, what=f"{option} to show its frames")
+    return time.perf_counter() - start
+
+
+def _shows(client, tag: str) -> bool:
+    card = client.html_containing("inspector-card'")
+    video = client.html_containing("inspector-video")
+    return f"data-rollout='{tag}'" in card and bool(video) and "loading" not in video and "<img" in video
+
+
+def bench_serve(tmp: Path, quick: bool) -> list[Figure]:
+    """``inspector serve`` as a process: peak RSS while one tab opens 60 rollouts one after another
+    (vs the same with a frame cache that never evicts), and with 8 tabs open."""
+    from inspector.app import HeadlessClient
+
+    n = 20 if quick else 60
+    video = _eval_session(tmp, "video", 60 if quick else 200, video=True)
+    figures = []
+    peaks = {}
+    for label, extra in (("ours", []), ("unbounded", ["--cache-mb", "1000000"])):
+        with _serve([str(video), *extra], fresh_cache(tmp)) as (proc, port):
+            done = []
+            opener = threading.Thread(target=lambda: done.append(_open_rollouts(port, n)), daemon=True)
+            opener.start()
+            peaks[label] = _sample_peak_rss(proc, lambda: not opener.is_alive(), 1800) / 2**20
+            if not done:
+                raise RuntimeError("opening rollouts failed")
+            peaks[label + "_s"] = done[0]
+    figures.append(Figure(f"serve_{n}_opened", peaks["ours"], "MiB", "< 1 GB", peaks["ours"] < 1024,
+                          note=f"peak RSS; baseline: a frame cache without a budget; {n} opens took "
+                               f"{peaks['ours_s']:.0f} s", baseline=peaks["unbounded"]))
+
+    with _serve([str(DEMO)], fresh_cache(tmp)) as (proc, port):
+        clients: list[HeadlessClient] = []
+        def connect_all() -> None:
+            for _ in range(8):
+                c = HeadlessClient(port, observe=True)
+                clients.append(c)
+                c.wait_until(lambda c=c: "<img" in c.html_containing("inspector-video"), timeout=180)
+
+        opener = threading.Thread(target=connect_all, daemon=True)
+        opener.start()
+        peak = _sample_peak_rss(proc, lambda: not opener.is_alive(), 1800) / 2**20
+        for c in clients:
+            c.close()
+    figures.append(Figure("serve_8_tabs", peak, "MiB", "< 1 GB", peak < 1024, note="peak RSS, demo session"))
+    return figures
 
 
 # ----------------------------------------------------------------------------------------------
-
-
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _wait_port(port: int, timeout: float) -> None:
-    import socket
-
-    deadline = time.time() + timeout
-    while time.time() < deadline:
-        try:
-            with socket.create_connection(("127.0.0.1", port), timeout=1):
-                return
-        except OSError:
-            time.sleep(0.2)
-    raise TimeoutError(f"server on port {port} did not start")
-
-
-def _peak_rss_kb(pid: int) -> int:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1])
-    return 0
 
 
 def _fmt(value: float | None, unit: str) -> str:
@@ -330,41 +433,51 @@ def _fmt(value: float | None, unit: str) -> str:
     return f"{value:.3g} {unit}"
 
 
+def _mib(value: float | None) -> str:
+    return "-" if value is None else f"{value:,.0f} MiB"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="fewer repetitions (under a minute)")
+    parser.add_argument("--quick", action="store_true", help="smaller counts, fewer repetitions")
     parser.add_argument("--json", type=Path, help="also write the figures as JSON")
-    parser.add_argument("--only", nargs="*", help="run only these figures")
+    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export open scrub serve")
     args = parser.parse_args(argv)
 
     figures: list[Figure] = []
     with tempfile.TemporaryDirectory(prefix="inspector-bench-") as tmp_name:
         tmp = Path(tmp_name)
+        os.environ["INSPECTOR_CACHE_DIR"] = str(tmp / "cache-bench")  # never the user's cache
         runs: list[tuple[str, Callable[[], Figure | list[Figure]]]] = [
             ("fk", lambda: bench_fk(args.quick)),
-            ("metrics_1000", lambda: bench_metrics_1000(args.quick)),
+            ("report", lambda: bench_report(tmp, args.quick)),
+            ("export", lambda: bench_export(tmp, args.quick)),
             ("open", lambda: bench_open(tmp, args.quick)),
             ("scrub", lambda: bench_scrub(tmp, args.quick)),
-            ("export", lambda: bench_export(tmp, args.quick)),
-            ("memory", lambda: bench_memory(tmp, args.quick)),
+            ("serve", lambda: bench_serve(tmp, args.quick)),
         ]
         for name, run in runs:
             if args.only and name not in args.only:
                 continue
+            t = time.perf_counter()
             result = run()
             figures += result if isinstance(result, list) else [result]
-            print(f"  measured {name}", file=sys.stderr)
+            print(f"  measured {name} ({time.perf_counter() - t:.0f} s)", file=sys.stderr)
 
     machine = f"{os.cpu_count()} CPUs, Python {sys.version.split()[0]}"
     print(f"\nBenchmarks ({time.strftime('%Y-%m-%d')}, {machine}; ratio = baseline / ours)\n")
-    print("| figure | ours | naive baseline | ratio | target | ok |")
-    print("|---|---|---|---|---|---|")
+    print("| figure | ours | peak RSS | naive baseline | baseline RSS | ratio | target | ok |")
+    print("|---|---|---|---|---|---|---|---|")
     for f in figures:
         ratio = "-" if f.ratio is None else f"{f.ratio:.1f}x"
-        ok = "-" if f.ok is None else ("yes" if f.ok else "**no**")
-        print(f"| {f.name} | {_fmt(f.ours, f.unit)} | {_fmt(f.baseline, f.unit)} | {ratio} | {f.target} | {ok} |")
+        ok = "yes" if f.ok else "**no**"
+        print(f"| {f.name} | {_fmt(f.ours, f.unit)} | {_mib(f.ours_rss_mib)} | {_fmt(f.baseline, f.unit)} | "
+              f"{_mib(f.baseline_rss_mib)} | {ratio} | {f.target} | {ok} |")
+    notes = [f"- `{f.name}`: {f.note}" for f in figures if f.note]
+    if notes:
+        print("\n" + "\n".join(notes))
     if args.json:
-        args.json.write_text(json.dumps([asdict(f) for f in figures], indent=2))
+        args.json.write_text(json.dumps([{**asdict(f), "ratio": f.ratio} for f in figures], indent=2))
     return 0
 
 

@@ -22,6 +22,7 @@ import sys
 from pathlib import Path
 from typing import Callable, Sequence
 
+from .cache import DEFAULT_FRAME_CACHE_MB
 from .errors import InspectorError
 
 EXIT_BAD_INPUT = 2
@@ -47,7 +48,8 @@ def _cmd_info(args: argparse.Namespace) -> int:
 def _cmd_report(args: argparse.Namespace) -> int:
     from .report import build_report, format_report
 
-    report = build_report(args.paths, dataset=args.dataset)
+    report = build_report(args.paths, dataset=args.dataset, jobs=args.jobs, use_cache=not args.no_cache,
+                          limit_margin_deg=args.limit_margin)
     print(json.dumps(report, indent=2) if args.json else format_report(report))
     return 0
 
@@ -55,7 +57,8 @@ def _cmd_report(args: argparse.Namespace) -> int:
 def _cmd_serve(args: argparse.Namespace) -> int:
     from .app import serve
 
-    serve(args.paths, host=args.host, port=args.port, share=args.share, dataset=args.dataset)
+    serve(args.paths, host=args.host, port=args.port, share=args.share, dataset=args.dataset,
+          cache_mb=args.cache_mb, use_cache=not args.no_cache)
     return 0
 
 
@@ -63,7 +66,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
     from .export import export_cli
 
     return export_cli(args.path, args.output, rollout=args.rollout, views=args.views,
-                      dataset=args.dataset)
+                      dataset=args.dataset, use_cache=not args.no_cache, limit_margin_deg=args.limit_margin)
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -74,6 +77,35 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         return 0
     rebuild_demo(Path(args.out) if args.out else None, quick=args.quick)
     return 0
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, found {value}")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, found {text}")
+    return value
+
+
+def _margin(text: str) -> float:
+    value = float(text)
+    if not (0.0 <= value < 360.0):
+        raise argparse.ArgumentTypeError(f"must be a number of degrees in [0, 360), found {text}")
+    return value
+
+
+def _limit_margin_argument(p: argparse.ArgumentParser) -> None:
+    from .units import DEFAULT_LIMIT_MARGIN_DEG
+
+    p.add_argument("--limit-margin", type=_margin, default=DEFAULT_LIMIT_MARGIN_DEG, metavar="DEG",
+                   help="a joint counts as past its URDF limit only beyond this margin "
+                        f"(default {DEFAULT_LIMIT_MARGIN_DEG:g} deg)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -101,6 +133,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("paths", nargs="+", help="sessions, rollouts or DreamZero-SO101 source dirs")
     p.add_argument("--json", action="store_true")
     p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
+    p.add_argument("--jobs", "-j", type=_positive_int, default=None,
+                   help="worker processes (default: one per core; 1 computes in this process)")
+    p.add_argument("--no-cache", action="store_true",
+                   help="neither read nor write the metrics cache ($INSPECTOR_CACHE_DIR, else ~/.cache/inspector)")
+    _limit_margin_argument(p)
     p.set_defaults(func=_cmd_report)
 
     p = sub.add_parser("serve", help="the web app (default: the bundled demo session)")
@@ -109,6 +146,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--port", type=int, default=8080)
     p.add_argument("--share", action="store_true", help="also open a public viser share link")
     p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
+    p.add_argument("--cache-mb", type=_positive_float, default=DEFAULT_FRAME_CACHE_MB, metavar="MB",
+                   help="memory for video frames sent to browsers, shared by all tabs "
+                        f"(default {DEFAULT_FRAME_CACHE_MB})")
+    p.add_argument("--no-cache", action="store_true", help="neither read nor write the metrics cache")
     p.set_defaults(func=_cmd_serve)
 
     p = sub.add_parser("export", help="write a Rerun .rrd recording")
@@ -117,6 +158,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rollout", help="tag of the rollout to export (default: all)")
     p.add_argument("--views", nargs="*", help="camera views to include (default: all)")
     p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
+    p.add_argument("--no-cache", action="store_true", help="neither read nor write the metrics cache")
+    _limit_margin_argument(p)
     p.set_defaults(func=_cmd_export)
 
     p = sub.add_parser("demo", help="rebuild the bundled demo session")

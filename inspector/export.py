@@ -19,14 +19,14 @@ a temporary sibling and renamed into place, so a failed export never leaves half
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import sys
 import tempfile
-import time
 import uuid
 from pathlib import Path
-from typing import Callable, Sequence, TextIO
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 import rerun as rr
@@ -150,12 +150,31 @@ def compute_psnr(tl: RolloutTimeline, views: Sequence[str],
     return {view: vm.psnr_db for view, vm in metrics_by_view.items()}
 
 
+@contextlib.contextmanager
+def cached_video_metrics(tl: RolloutTimeline, cache) -> Iterator[None]:
+    """Give ``tl`` the video metrics the metrics cache holds for it; keep the ones computed
+    meanwhile there (a rollout the app or ``report`` has seen exports without decoding)."""
+    from .cache import rollout_key
+    from .video_metrics import VideoMetrics
+
+    key = rollout_key(tl.rollout, tl.gt, tl.limit_margin_deg)
+    record = cache.get(key) or {}
+    known = dict(record.get("video") or {})
+    for data in known.values():
+        tl.set_video_metrics(VideoMetrics.from_json(data))
+    yield
+    new = {v: vm.to_json() for v, vm in tl.known_video_metrics().items() if v not in known}
+    if new:
+        cache.put(key, {"row": record.get("row"), "video": {**known, **new}})
+
+
 # ----------------------------------------------------------------------------------------------
 # Command line
 
 
 def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
-               views: Sequence[str] | None = None, dataset: str | Path | None = None) -> int:
+               views: Sequence[str] | None = None, dataset: str | Path | None = None,
+               use_cache: bool = True, limit_margin_deg: float | None = None) -> int:
     """``inspector export``: write one recording per rollout; returns the exit code.
 
     Args:
@@ -165,13 +184,20 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
         rollout: export only the rollout with this tag.
         views: camera views to include (default: all).
         dataset: LeRobot dataset with the GT episodes.
+        use_cache: take video metrics from the metrics cache (and keep new ones there).
+        limit_margin_deg: joint-limit margin [deg] (default: the usual 2 deg).
 
     Bad input prints ``error: <file>: <what>`` to stderr and returns 2; the other rollouts of a
     session are still exported when one of them is broken.
     """
+    from .cache import MetricsCache
+    from .progress import FractionBar
     from .sources import open_sources
     from .timeline import build_timeline
+    from .units import DEFAULT_LIMIT_MARGIN_DEG
 
+    margin = DEFAULT_LIMIT_MARGIN_DEG if limit_margin_deg is None else limit_margin_deg
+    cache = MetricsCache(enabled=use_cache)
     errors = 0
     try:
         sources = open_sources([path], dataset=dataset)
@@ -182,12 +208,13 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
                     _print_error(session.errors[tag])
                     errors += 1
                     continue
-                bar = TextProgress(tag)
+                bar = FractionBar(tag)
                 try:
-                    tl = build_timeline(session.rollouts[tag])
+                    tl = build_timeline(session.rollouts[tag], limit_margin_deg=margin)
                     rollout_views = None if views is None else [
                         v for v in views if v in tl.rollout.views or v in tl.gt.views]
-                    write_recording(tl, dest, views=rollout_views, progress=bar)
+                    with cached_video_metrics(tl, cache):
+                        write_recording(tl, dest, views=rollout_views, progress=bar)
                 except InspectorError as exc:
                     bar.close()
                     _print_error(exc)
@@ -240,36 +267,3 @@ def format_size(n_bytes: int) -> str:
         if n_bytes >= scale:
             return f"{n_bytes / scale:.1f} {unit}"
     return f"{n_bytes} B"
-
-
-class TextProgress:
-    """A one-line text progress bar on a terminal (nothing when the stream is not a TTY).
-
-    It appears only once an export has run for ``delay_s``, so quick exports stay quiet.
-    """
-
-    def __init__(self, label: str, stream: TextIO | None = None, width: int = 30, delay_s: float = 0.5):
-        self.label, self.width, self.delay_s = label, width, delay_s
-        self.stream = stream if stream is not None else sys.stderr
-        self._start = time.monotonic()
-        self._shown = False
-        self._enabled = bool(getattr(self.stream, "isatty", lambda: False)())
-
-    def __call__(self, fraction: float, message: str = "") -> None:
-        if not self._enabled or time.monotonic() - self._start < self.delay_s:
-            return
-        self.stream.write("\r" + self.line(fraction, message))
-        self.stream.flush()
-        self._shown = True
-
-    def line(self, fraction: float, message: str = "") -> str:
-        fraction = min(max(fraction, 0.0), 1.0)
-        filled = int(round(fraction * self.width))
-        return (f"{self.label} [{'#' * filled}{'.' * (self.width - filled)}] "
-                f"{fraction:4.0%} {message}")[:100].ljust(100)
-
-    def close(self) -> None:
-        if self._shown:
-            self.stream.write("\r" + " " * 100 + "\r")
-            self.stream.flush()
-            self._shown = False

@@ -1,26 +1,25 @@
 """Imagined and GT video in a recording: one ``AssetVideo`` per clip plus a frame reference per frame.
 
-Frames are never logged as images. An H.264 file is embedded as it is; anything else (an AV1
-dataset video, a v3.0 file holding many episodes) is re-encoded to H.264 first, holding only
-the frames the rollout shows. Each reference sits at the time of the imagined frame it pairs
-with, exactly as the app pairs them (:meth:`GroundTruth.frame`).
+Frames are never logged as images. An H.264 file is embedded as it is, never decoded; anything
+else (an AV1 dataset video, a v3.0 file holding many episodes) is streamed into a new H.264 file,
+frame by frame, holding only the frames the rollout shows. Each reference sits at the time of
+the imagined frame it pairs with, exactly as the app and the metrics pair them
+(:meth:`RolloutTimeline.gt_index_of_frame`).
 """
 
 from __future__ import annotations
 
-import os
-import tempfile
-from fractions import Fraction
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
 import numpy.typing as npt
 import rerun as rr
 
 from . import export_layout as L
+from .errors import InspectorError
 from .timeline import RolloutTimeline
-from .video import VideoClip, probe
+from .video import ForwardReader, encode_h264, probe
 
 PLAYABLE_CODECS = ("h264",)
 Progress = Callable[[float], None]
@@ -42,7 +41,8 @@ def log_view(rec: rr.RecordingStream, tl: RolloutTimeline, view: str, work_dir: 
 def log_imagined(rec: rr.RecordingStream, tl: RolloutTimeline, view: str, work_dir: Path) -> int:
     src = tl.rollout.video_path(view)
     if probe(src).codec not in PLAYABLE_CODECS:
-        src = _reencode(tl.rollout.video(view).frames, tl.fps, work_dir / f"{view}_imagined.mp4")
+        src = _reencode((rgb for _, rgb in tl.rollout.video(view).iter_frames()), tl.fps,
+                        work_dir / f"{view}_imagined.mp4")
     asset = rr.AssetVideo(path=src)
     timestamps = asset.read_frame_timestamps_nanos()
     entity = L.video_path(view, "imagined")
@@ -55,21 +55,30 @@ def log_imagined(rec: rr.RecordingStream, tl: RolloutTimeline, view: str, work_d
 def log_gt(rec: rr.RecordingStream, tl: RolloutTimeline, view: str, work_dir: Path,
            n_imagined: int, progress: Progress | None = None) -> int:
     """GT of ``view``: a carried H.264 clip as it is (frame i pairs with imagined frame i), else
-    the episode frames paired with each imagined frame, encoded to a new H.264 asset."""
+    the episode frames paired with each imagined frame, streamed into a new H.264 asset."""
     clip = tl.gt.clips[view]
-    if isinstance(clip, VideoClip) and probe(clip.path).codec in PLAYABLE_CODECS:
+    if tl.gt.carried and probe(clip.path).codec in PLAYABLE_CODECS:
         asset = rr.AssetVideo(path=clip.path)
         timestamps = asset.read_frame_timestamps_nanos()
         shown = np.arange(min(len(timestamps), n_imagined))
         timestamps = timestamps[shown]
     else:
-        steps = tl.frame_step(n_imagined)
-        pairs = [(f, tl.gt.frame(view, f, int(steps[f]))) for f in range(n_imagined)]
-        pairs = [(f, g) for f, g in pairs if g is not None]
-        if not pairs:
+        index_of = tl.gt_index_of_frame(view)
+        shown = np.array([f for f in range(n_imagined) if index_of(f) >= 0], dtype=np.int64)
+        if shown.size == 0:
             return 0
-        shown = np.array([f for f, _ in pairs])
-        path = _reencode(np.stack([g for _, g in pairs]), tl.fps, work_dir / f"{view}_gt.mp4", progress)
+        reader = ForwardReader(clip)
+
+        def paired() -> Iterator[npt.NDArray[np.uint8]]:
+            for i, f in enumerate(shown):
+                frame = reader.frame_at(index_of(int(f)))
+                if frame is None:
+                    raise InspectorError(clip.path, f"no GT frame {index_of(int(f))} for imagined frame {f}")
+                if progress is not None and i % 32 == 0:
+                    progress(i / len(shown))
+                yield frame
+
+        path = _reencode(paired(), tl.fps, work_dir / f"{view}_gt.mp4")
         asset = rr.AssetVideo(path=path)
         timestamps = asset.read_frame_timestamps_nanos()
     entity = L.video_path(view, "gt")
@@ -90,29 +99,7 @@ def frame_indexes(tl: RolloutTimeline, frames: npt.NDArray[np.int64]) -> list[rr
     ]
 
 
-def _reencode(frames: npt.NDArray[np.uint8], fps: float, dest: Path,
-              progress: Progress | None = None) -> Path:
-    """(N, H, W, 3) uint8 -> H.264 MP4 at ``dest`` (fast preset: the asset only has to play)."""
-    import av
-
-    n, h, w, _ = frames.shape
-    if h % 2 or w % 2:
-        frames = np.pad(frames, ((0, 0), (0, h % 2), (0, w % 2), (0, 0)), mode="edge")
-    fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".mp4", dir=dest.parent)
-    os.close(fd)
-    try:
-        with av.open(tmp, mode="w") as container:
-            stream = container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1001))
-            stream.width, stream.height = frames.shape[2], frames.shape[1]
-            stream.pix_fmt = "yuv420p"
-            stream.options = {"crf": "23", "preset": "veryfast"}
-            for i, image in enumerate(frames):
-                frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(image), format="rgb24")
-                container.mux(stream.encode(frame))
-                if progress is not None and i % 32 == 0:
-                    progress(i / n)
-            container.mux(stream.encode())
-        os.replace(tmp, dest)
-    finally:
-        Path(tmp).unlink(missing_ok=True)
+def _reencode(frames: Iterable[npt.NDArray[np.uint8]], fps: float, dest: Path) -> Path:
+    """RGB frames, streamed -> H.264 MP4 at ``dest`` (fast preset: the asset only has to play)."""
+    encode_h264(dest, frames, fps, preset="veryfast")
     return dest

@@ -3,13 +3,15 @@
 A rollout may carry GT joints (``gt/actions.npy``) and GT video (``gt/video/<view>.mp4``, frame i at
 imagined frame i's time). Otherwise the session's LeRobot dataset supplies the episode: its
 ``action`` column (the commands, as the model predicts commands) and its camera frames.
+
+Nothing here decodes video: a :class:`GroundTruth` says which clip holds each view's GT frames
+and which of its frames goes with each imagined frame and each step.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import numpy.typing as npt
@@ -28,8 +30,14 @@ class GroundTruth:
         offset: index in ``actions`` of rollout step 0.
         episode_length: frames in the real episode (from rollout step 0's episode start), if known.
         source: a short description for the UI ("dataset <root> episode 3", "carried with rollout").
-        frame_for: ``frame_for(view, imagined_frame_index, step)`` -> (H, W, 3) uint8 or None.
         views: views with GT frames.
+        clips: view -> the clip holding its GT frames. A dataset clip starts at the rollout's
+            start frame (its frame i shows step i); a carried clip's frame i pairs with
+            imagined frame i.
+        carried: True when the GT frames are carried with the rollout (paired by imagined frame).
+        dataset_key: identity of the dataset episode the GT comes from (rollouts with the same key
+            share their GT), or None for carried / no GT.
+        files: the dataset files it was read from (caches key on their size and time).
     """
 
     actions: npt.NDArray[np.float64] | None
@@ -37,8 +45,11 @@ class GroundTruth:
     episode_length: int | None
     source: str
     views: list[str] = field(default_factory=list)
-    _frame_for: Callable[[str, int, int], npt.NDArray[np.uint8] | None] | None = None
     clips: dict[str, VideoClip] = field(default_factory=dict)
+    carried: bool = False
+    dataset_key: tuple | None = None
+    files: list[Path] = field(default_factory=list)
+    _frames_in_clip: dict[str, int] = field(default_factory=dict, repr=False)
 
     @property
     def steps_in_episode(self) -> int | None:
@@ -47,11 +58,18 @@ class GroundTruth:
             return self.actions.shape[0] - self.offset
         return None if self.episode_length is None else self.episode_length - self.offset
 
-    def frame(self, view: str, imagined_frame: int, step: int) -> npt.NDArray[np.uint8] | None:
-        """GT frame at the time of an imagined frame (None past the episode or with no such view)."""
-        if self._frame_for is None or view not in self.views:
+    def frames_in_clip(self, view: str) -> int:
+        """GT frames available for ``view`` (a carried clip's are counted once from its packets)."""
+        if view not in self._frames_in_clip:
+            self._frames_in_clip[view] = len(self.clips[view].timestamps())
+        return self._frames_in_clip[view]
+
+    def display_index(self, view: str, imagined_frame: int, step: int) -> int | None:
+        """Index in ``clips[view]`` of the GT frame shown at ``step`` (None past the episode)."""
+        if view not in self.clips:
             return None
-        return self._frame_for(view, imagined_frame, step)
+        index = imagined_frame if self.carried else step
+        return index if index < self.frames_in_clip(view) else None
 
 
 def resolve_ground_truth(rollout: Rollout, dataset_root: Path | None = None) -> GroundTruth:
@@ -64,22 +82,25 @@ def resolve_ground_truth(rollout: Rollout, dataset_root: Path | None = None) -> 
     root = dataset_root
     if root is None and rollout.session is not None:
         root = rollout.session.dataset_root
-    episode = None
+    episode, dataset_files = None, []
     if root is not None and rollout.episode_index is not None and (rollout.gt_actions is None or not rollout.gt_views):
-        from .lerobot_dataset import LeRobotDataset
+        from .lerobot_dataset import open_dataset
 
         if Path(root).exists():
-            ds = LeRobotDataset(root)
-            if rollout.episode_index >= ds.num_episodes:
+            ds = open_dataset(root)
+            if rollout.episode_index not in ds.episode_indexes():
                 raise InspectorError(rollout.root / "rollout.json",
                                      f"episode_index {rollout.episode_index} not in dataset {root} "
-                                     f"(episodes 0..{ds.num_episodes - 1})")
+                                     f"(episodes {ds.describe_episodes()})")
             episode = ds.episode(rollout.episode_index)
+            info = ds.episode_info(rollout.episode_index)
+            dataset_files = [ds.root / "meta" / "info.json", info.data_file, *(v.path for v in info.videos.values())]
             if rollout.start_frame >= episode.length:
                 raise InspectorError(rollout.root / "rollout.json",
                                      f"start_frame {rollout.start_frame} lies beyond episode "
                                      f"{rollout.episode_index} ({episode.length} frames)")
 
+    dataset_key = None
     if rollout.gt_actions is not None:
         actions, offset, source = rollout.gt_actions, 0, "carried with the rollout"
         length = rollout.gt_episode_length
@@ -87,46 +108,22 @@ def resolve_ground_truth(rollout: Rollout, dataset_root: Path | None = None) -> 
     elif episode is not None:
         actions, offset = episode.action, rollout.start_frame
         length, source = episode.length, f"dataset {root} episode {rollout.episode_index}"
+        dataset_key = (str(Path(root).resolve()), episode.index, rollout.start_frame)
     else:
         actions, offset, source = None, 0, "none"
         if root is not None and not Path(root).exists():
             source = f"none (dataset {root} not found)"  # named but gone: say so, don't hide it
         length = rollout.gt_episode_length
         length = None if length is None else length - rollout.start_frame
-        offset = 0
 
-    gt = GroundTruth(actions=actions, offset=offset, episode_length=length, source=source)
+    gt = GroundTruth(actions=actions, offset=offset, episode_length=length, source=source,
+                     dataset_key=dataset_key, files=dataset_files)
     if rollout.gt_views:
         gt.views = list(rollout.gt_views)
         gt.clips = {v: rollout.video(v, gt=True) for v in gt.views}
-
-        def carried(view: str, f: int, step: int) -> npt.NDArray[np.uint8] | None:
-            clip = gt.clips[view]
-            return clip.frames[f] if f < len(clip) else None
-
-        gt._frame_for = carried
+        gt.carried = True
     elif episode is not None:
         gt.views = [v for v in rollout.views if v in episode.cameras] or list(episode.cameras)
-
-        def from_dataset(view: str, f: int, step: int) -> npt.NDArray[np.uint8] | None:
-            clip = episode.video(view)
-            index = rollout.start_frame + step
-            return clip.frames[index] if index < len(clip) else None
-
-        gt.clips = {v: _LazyEpisodeClip(episode, v) for v in gt.views}  # type: ignore[misc]
-        gt._frame_for = from_dataset
+        gt.clips = {v: episode.clip_from(v, rollout.start_frame) for v in gt.views}
+        gt._frames_in_clip = {v: episode.length - rollout.start_frame for v in gt.views}
     return gt
-
-
-class _LazyEpisodeClip:
-    """A dataset camera behaving like a VideoClip (decoded on first use)."""
-
-    def __init__(self, episode, camera: str) -> None:
-        self._episode, self._camera = episode, camera
-
-    @property
-    def frames(self) -> npt.NDArray[np.uint8]:
-        return self._episode.video(self._camera).frames
-
-    def __len__(self) -> int:
-        return len(self.frames)

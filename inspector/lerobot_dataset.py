@@ -34,8 +34,8 @@ Usage::
     ds = LeRobotDataset(find_dataset("~/.cache/huggingface/lerobot/me/so101_pick"))
     ep = ds.episode(2)               # joints read now, video decoded on first frame access
     ep.state                         # (T, 6) float64, JOINT_NAMES order, dataset units
-    ep.load_videos()                 # optional: decode every camera now, side by side
-    ep.frame_at("front", 1.5)        # (H, W, 3) uint8
+    ep.frame_at("front", 1.5)        # (H, W, 3) uint8, decoded alone
+    for i, rgb in ep.video("front").iter_frames(size=(320, 240)): ...   # streamed
 
 Joint columns are mapped by *name* (``features[key]["names"]``) into
 :data:`inspector.units.JOINT_NAMES` order, never by position.
@@ -48,6 +48,8 @@ import json
 import os
 import re
 import sys
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -116,6 +118,9 @@ def ep_video_column(video_key: str, field_name: str) -> str:
     to_timestamp (v3.0 meta/episodes)."""
     return f"videos/{video_key}/{field_name}"
 
+
+# Episodes whose joints a dataset keeps in memory (a 600-frame episode's joints take ~60 kB).
+EPISODE_CACHE_SIZE = 64
 
 # Tolerated difference between decoded video frames and the episode's length: encoders sometimes
 # drop or repeat the last frame; more than that is a broken file.
@@ -192,6 +197,36 @@ def find_dataset(path_or_repo_id: str | Path) -> Path:
     raise InspectorError(text, f"dataset not found locally (looked in {where}); {how}")
 
 
+_open_datasets: OrderedDict[tuple[str, int, int], "LeRobotDataset"] = OrderedDict()
+_open_datasets_lock = threading.Lock()
+
+
+def open_dataset(root: str | Path) -> "LeRobotDataset":
+    """A :class:`LeRobotDataset`, shared by every caller in this process while its
+    ``meta/info.json`` is unchanged: a thousand rollouts of one dataset read its metadata once.
+
+    Raises:
+        InspectorError: as :class:`LeRobotDataset`.
+    """
+    path = _expand(root).resolve()
+    try:
+        st = (path / INFO_PATH).stat()
+        key = (str(path), st.st_mtime_ns, st.st_size)
+    except OSError:
+        return LeRobotDataset(path)  # raises the reader's own error
+    with _open_datasets_lock:
+        ds = _open_datasets.get(key)
+        if ds is not None:
+            _open_datasets.move_to_end(key)
+            return ds
+    ds = LeRobotDataset(path)
+    with _open_datasets_lock:
+        _open_datasets[key] = ds
+        while len(_open_datasets) > 8:
+            _open_datasets.popitem(last=False)
+    return ds
+
+
 # ==================================================================================================
 # Data model
 # ==================================================================================================
@@ -240,7 +275,7 @@ class EpisodeInfo:
 
 @dataclass
 class Episode:
-    """One episode's joints, read now, and its video, decoded on first access.
+    """One episode's joints, read now, and its video, streamed when asked for.
 
     Attributes:
         index: episode_index.
@@ -269,50 +304,50 @@ class Episode:
     cameras: list[str]
     videos: dict[str, VideoSegment]
     source: Path = Path(".")
-    _clips: dict[str, VideoClip] = field(default_factory=dict, repr=False)
 
     def video(self, camera: str) -> VideoClip:
-        """The camera's clip for this episode, decoded once and cached; its times start at 0 [s].
+        """The camera's clip for this episode (frame i is the episode's frame i), its frame count
+        checked against the episode's length from the container's packets (nothing decoded).
 
         Raises:
-            InspectorError: unknown camera, missing/undecodable file, or a frame count that does
+            InspectorError: unknown camera, missing/unreadable file, or a frame count that does
                 not match the episode's length.
+        """
+        clip = self.clip_from(camera, 0)
+        n = len(clip.timestamps())
+        if abs(n - self.length) > FRAME_COUNT_SLACK:
+            seg = self.videos[camera]
+            window = (f" in [{seg.from_timestamp:.3f}, {seg.to_timestamp:.3f}) s"
+                      if seg.to_timestamp is not None else "")
+            raise InspectorError(seg.path, f"{IMAGE_PREFIX}{camera}: {n} frames{window}, "
+                                           f"episode {self.index} has {self.length}")
+        return clip
+
+    def clip_from(self, camera: str, start_frame: int) -> VideoClip:
+        """The camera's frames from the episode's frame ``start_frame`` on (frame i of the clip is
+        episode frame ``start_frame + i``); nothing is read.
+
+        Raises:
+            InspectorError: unknown camera.
         """
         if camera not in self.videos:
             raise InspectorError(self.source / INFO_PATH, f"episode {self.index} has no camera {camera!r}; "
-                                         f"cameras: {self.cameras}")
-        if camera not in self._clips:
-            seg = self.videos[camera]
-            clip = VideoClip(seg.path, seg.from_timestamp if seg.to_timestamp is not None else None,
-                             seg.to_timestamp).load()
-            if abs(len(clip) - self.length) > FRAME_COUNT_SLACK:
-                window = (f" in [{seg.from_timestamp:.3f}, {seg.to_timestamp:.3f}) s"
-                          if seg.to_timestamp is not None else "")
-                raise InspectorError(seg.path, f"{IMAGE_PREFIX}{camera}: decoded {len(clip)} frames"
-                                               f"{window}, episode {self.index} has {self.length}")
-            self._clips[camera] = clip
-        return self._clips[camera]
+                                                          f"cameras: {self.cameras}")
+        seg = self.videos[camera]
+        return VideoClip(seg.path, seg.from_timestamp + start_frame / self.fps, seg.to_timestamp)
 
-    def load_videos(self, cameras: list[str] | None = None) -> "Episode":
-        """Decode the cameras' clips now (all by default), one thread per camera: the decoders
-        release the GIL, so views decode side by side instead of one after another."""
-        todo = [c for c in (self.cameras if cameras is None else cameras) if c not in self._clips]
-        if len(todo) > 1:
-            from concurrent.futures import ThreadPoolExecutor
-
-            with ThreadPoolExecutor(len(todo)) as pool:
-                list(pool.map(self.video, todo))  # list() re-raises the first error
-        elif todo:
-            self.video(todo[0])
-        return self
-
-    def frame(self, camera: str, index: int) -> npt.NDArray[np.uint8]:
-        """(H, W, 3) uint8 frame ``index`` of ``camera`` (clamped into the clip)."""
-        return self.video(camera).frame(index)
+    def frame(self, camera: str, index: int, size: tuple[int, int] | None = None) -> npt.NDArray[np.uint8]:
+        """(H, W, 3) uint8 frame ``index`` of ``camera`` (clamped into the episode), decoded alone."""
+        index = int(np.clip(index, 0, self.length - 1))
+        frame = self.clip_from(camera, index).frame(0, size)
+        if frame is None:
+            raise InspectorError(self.videos[camera].path, f"{IMAGE_PREFIX}{camera}: no frame {index} "
+                                                           f"in episode {self.index}")
+        return frame
 
     def frame_at(self, camera: str, t_s: float) -> npt.NDArray[np.uint8]:
         """(H, W, 3) uint8 frame of ``camera`` showing at ``t_s`` [s] from the episode's start."""
-        return self.video(camera).frame_at(t_s)
+        return self.frame(camera, int(np.floor(t_s * self.fps + 1e-6)))
 
 
 # ==================================================================================================
@@ -363,6 +398,9 @@ class LeRobotDataset:
 
         self._units: Units | None = None
         self.units_reason: str = ""
+        # Episodes' joints, most recently used last: many rollouts of one episode read it once.
+        self._episode_cache: OrderedDict[tuple, Episode] = OrderedDict()
+        self._episodes_lock = threading.Lock()
         if UNITS_KEY in info:
             try:
                 self._units = parse_units(info[UNITS_KEY], f"{INFO_PATH} {UNITS_KEY}")
@@ -470,6 +508,14 @@ class LeRobotDataset:
         except KeyError:
             raise InspectorError(self.root, f"episode {index} is out of range; available: "
                                             f"{_describe_indices(list(self._episode_map))}") from None
+
+    def episode_indexes(self) -> set[int]:
+        """The episode indexes the dataset holds."""
+        return set(self._episode_map)
+
+    def describe_episodes(self) -> str:
+        """The episode indexes in a few words (``"0..41"``, gaps listed)."""
+        return _describe_indices(list(self._episode_map))
 
     def task(self, index: int) -> str:
         """The task string of episode ``index``."""
@@ -629,11 +675,30 @@ class LeRobotDataset:
         return joints[0], joints[1], cols
 
     def episode(self, index: int) -> Episode:
-        """Read episode ``index``: joints now, video lazily.
+        """Episode ``index``: joints read now (kept for the next call), video streamed on demand.
 
         Raises:
             InspectorError: out of range, missing/malformed data file, NaN/inf joints.
         """
+        info = self.episode_info(index)
+        try:  # a data file rewritten (or removed) since it was read is read again
+            st = info.data_file.stat()
+            key: tuple = (index, st.st_mtime_ns, st.st_size)
+        except OSError:
+            return self._read_episode(index)  # raises the reader's own error
+        with self._episodes_lock:
+            cached = self._episode_cache.get(key)
+            if cached is not None:
+                self._episode_cache.move_to_end(key)
+                return cached
+        episode = self._read_episode(index)
+        with self._episodes_lock:
+            self._episode_cache[key] = episode
+            while len(self._episode_cache) > EPISODE_CACHE_SIZE:
+                self._episode_cache.popitem(last=False)
+        return episode
+
+    def _read_episode(self, index: int) -> Episode:
         info = self.episode_info(index)
         state, action, cols = self._read_joints(info)
         if self._units is None and info is self.episodes[0]:

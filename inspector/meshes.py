@@ -33,12 +33,9 @@ _SETTINGS = f"v1-cell{CELL_M:g}-keep{KEEP_FRACTION:g}-min{MIN_FACES}"
 
 def cache_dir() -> Path:
     """The mesh cache directory (created on demand)."""
-    env = os.environ.get("INSPECTOR_CACHE_DIR")
-    if env:
-        root = Path(env).expanduser()
-    else:
-        root = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache").expanduser() / "inspector"
-    path = root / "meshes"
+    from .cache import default_dir
+
+    path = default_dir() / "meshes"
     try:
         path.mkdir(parents=True, exist_ok=True)
         if not os.access(path, os.W_OK):

@@ -7,14 +7,11 @@ All joint-space figures are in the data's own units (arm degrees or -100..100, g
 
 from __future__ import annotations
 
-import contextlib
 import os
 from dataclasses import dataclass
-from typing import Iterator
 
 import numpy as np
 import numpy.typing as npt
-import torch
 
 Array = npt.NDArray[np.float64]
 
@@ -85,20 +82,6 @@ def time_aligned(pred: npt.ArrayLike, gt: npt.ArrayLike, offset: int = 0) -> tup
     idx = np.minimum(t, gt.shape[0] - 1)
     gt_aligned = gt[idx]
     return joint_distance(pred, gt_aligned), gt_aligned, t >= gt.shape[0]
-
-
-def _squared_distances(p: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
-    """(B, T, G) squared joint distances of (B, T, 6) against (G, 6), as one matmul.
-
-    ``|a - b|^2 = |a|^2 + |b|^2 - 2 a.b`` written as ``[a, |a|^2, 1] . [-2b, 1, |b|^2]``: BLAS
-    writes the table in one pass with no broadcast temporaries. float64 keeps the cancellation
-    error near 1e-12 of the squared magnitudes.
-    """
-    ones_p = torch.ones(p.shape[:-1] + (1,), dtype=p.dtype)
-    ones_g = torch.ones(g.shape[:-1] + (1,), dtype=g.dtype)
-    p_aug = torch.cat([p, (p * p).sum(-1, keepdim=True), ones_p], dim=-1)
-    g_aug = torch.cat([-2.0 * g, ones_g, (g * g).sum(-1, keepdim=True)], dim=-1)
-    return torch.matmul(p_aug, g_aug.T).clamp_(min=0.0)
 
 
 def best_match(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, npt.NDArray[np.int64]]:
@@ -188,8 +171,8 @@ def dtw(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, Array | float]:
     """Order-preserving alignment (dynamic time warping) of predicted and GT paths.
 
     Unlike best-match, a prediction that visits the right poses in the wrong order pays for it.
-    Rollouts are processed in blocks, one thread per core: the row operations are too small for
-    torch's own threads to pay off, but whole blocks run side by side.
+    Rollouts are processed in blocks sized to a memory budget (:data:`DTW_BLOCK_BYTES`), one
+    thread per core (numpy releases the GIL in the row operations).
 
     Args:
         pred: (..., T, 6).
@@ -203,27 +186,32 @@ def dtw(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, Array | float]:
 
     p = np.ascontiguousarray(pred, np.float64)
     g = np.ascontiguousarray(gt, np.float64)
+    if len(g) == 0:
+        raise ValueError("dtw: the GT episode is empty")
     squeeze = p.ndim == 2
     if squeeze:
         p = p[None]
-    block = max(1, min(256, -(-len(p) // (os.cpu_count() or 1))))
-    blocks = [p[i:i + block] for i in range(0, len(p), block)]
-    with _torch_threads(1), ThreadPoolExecutor(max_workers=min(len(blocks), os.cpu_count() or 1)) as pool:
+    lead = p.shape[:-2]
+    p = p.reshape(-1, *p.shape[-2:])
+    B, T, _ = p.shape
+    workers = min(B, os.cpu_count() or 1)
+    by_memory = max(1, DTW_BLOCK_BYTES // max(1, 5 * T * len(g)))
+    block = max(1, min(by_memory, -(-B // workers)))
+    blocks = [p[i:i + block] for i in range(0, B, block)]
+    with ThreadPoolExecutor(max_workers=max(1, min(len(blocks), workers))) as pool:
         results = list(pool.map(lambda b: _dtw_block(b, g), blocks))
-    drift = np.concatenate([r[0] for r in results])
-    cost = np.concatenate([r[1] for r in results])
+    drift = np.concatenate([r[0] for r in results]).reshape(*lead, T)
+    cost = np.concatenate([r[1] for r in results]).reshape(lead)
     return (drift[0], float(cost[0])) if squeeze else (drift, cost)
 
 
-@contextlib.contextmanager
-def _torch_threads(n: int) -> Iterator[None]:
-    """Run a block of torch work with ``n`` intra-op threads, then restore the previous count."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(n)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(previous)
+# Memory for one block of DTW tables [bytes]: 5 bytes per cell (float32 costs and a direction
+# byte), so a 540-step rollout against a 600-frame episode takes 1.6 MB.
+DTW_BLOCK_BYTES = 64 * 1024 * 1024
+
+# A cell of the DTW direction table names its predecessor: bit 1 set = left, else bit 0 set = up,
+# else the diagonal.
+_UP_BIT, _LEFT_BIT = 1, 2
 
 
 def _dtw_block(p: npt.NDArray[np.float64], g: npt.NDArray[np.float64]) -> tuple[Array, Array]:
@@ -232,49 +220,59 @@ def _dtw_block(p: npt.NDArray[np.float64], g: npt.NDArray[np.float64]) -> tuple[
     Within a row, ``D[i, j] = min(a_j, c_ij + D[i, j-1])`` with ``a_j = c_ij + min(D[i-1, j-1],
     D[i-1, j])`` is a min-plus scan: with ``S`` the running sum of the row's costs,
     ``D[i, :] = S + cummin(a - S)``. So each row is a cumsum and a cummin, not a loop over j.
-    Tables are laid out (T, G, B) so every scan runs along the outer axis over contiguous rows.
-    Costs are float32 and made row by row: they only choose the path; the backtrack measures the
-    chosen cells exactly.
+    Costs are float32, one small matrix product per rollout (so a rollout's path never depends
+    on which others share its block); they only choose the path: each cell keeps the cheapest
+    of its three predecessors (the diagonal first on ties, as textbook DTW does) and the
+    backtrack measures the chosen cells exactly in float64.
     """
     B, T, _ = p.shape
     G = g.shape[0]
     centre = g.mean(axis=0)
-    # absurd inputs (1e30 deg) would overflow float32 to inf: clip, the path is measured in float64 anyway
-    limit = np.finfo(np.float32).max / 1e3
-    pc = torch.from_numpy(np.clip(p - centre, -limit, limit).astype(np.float32)).permute(1, 0, 2).contiguous()  # (T, B, 6)
-    gc = torch.from_numpy(np.clip(g - centre, -limit, limit).astype(np.float32))  # (G, 6)
-    g_sq = (gc * gc).sum(-1)[:, None]  # (G, 1)
-    # acc[i + 1, j + 1] = D[i, j]; row 0 and column 0 are the boundary (inf, 0 at the origin)
-    acc = torch.empty((T + 1, G + 1, B), dtype=torch.float32)
-    acc[0] = float("inf")
-    acc[:, 0] = float("inf")
-    acc[0, 0] = 0.0
-    cost = torch.empty((G, B), dtype=torch.float32)
-    a = torch.empty((G, B), dtype=torch.float32)
-    running = torch.empty((G, B), dtype=torch.float32)
-    argmin = torch.empty((G, B), dtype=torch.long)
+    # absurd inputs (1e30 deg) would overflow float32 squares to inf: clip so that a squared
+    # distance over 6 joints stays finite; the path is measured in float64 anyway
+    limit = 1e18
+    pc = np.clip(p - centre, -limit, limit).astype(np.float32)  # (B, T, 6)
+    gc = np.clip(g - centre, -limit, limit).astype(np.float32)  # (G, 6)
+    cost = np.empty((B, T, G), dtype=np.float32)
+    for b in range(B):  # |p - g|^2 = |p|^2 + |g|^2 - 2 p.g
+        np.matmul(pc[b], gc.T, out=cost[b])
+    cost *= -2.0
+    cost += (gc * gc).sum(-1)[None, None]
+    cost += (pc * pc).sum(-1)[:, :, None]
+    np.maximum(cost, 0.0, out=cost)
+    np.sqrt(cost, out=cost)
+    direction = np.empty((B, T, G), dtype=np.uint8)
+    prev = np.full((B, G + 1), np.inf, dtype=np.float32)  # D[i-1, -1..G-1]; column -1 is the boundary
+    prev[:, 0] = 0.0  # the origin: D[-1, -1] = 0
+    row = np.empty((B, G + 1), dtype=np.float32)
+    row[:, 0] = np.inf
+    best_prev, a, running = (np.empty((B, G), dtype=np.float32) for _ in range(3))
+    up, left = np.empty((B, G), dtype=bool), np.empty((B, G), dtype=bool)
     for i in range(T):
-        p_i = pc[i]  # (B, 6)
-        torch.addmm(g_sq + (p_i * p_i).sum(-1)[None], gc, p_i.T, beta=1.0, alpha=-2.0, out=cost)
-        cost.clamp_(min=0.0).sqrt_()
-        prev = acc[i]
-        torch.minimum(prev[:-1], prev[1:], out=a)
-        a += cost
-        torch.cumsum(cost, dim=0, out=running)
+        c = cost[:, i]
+        np.minimum(prev[:, :-1], prev[:, 1:], out=best_prev)
+        np.less(prev[:, 1:], prev[:, :-1], out=up)  # up strictly cheaper than the diagonal
+        np.add(best_prev, c, out=a)
+        np.cumsum(c, axis=1, out=running)
         a -= running
-        row = acc[i + 1, 1:]
-        torch.cummin(a, dim=0, out=(row, argmin))
-        row += running
-    drift, total, length = _dtw_backtrack(p, g, acc.permute(2, 0, 1).numpy())
+        np.minimum.accumulate(a, axis=1, out=row[:, 1:])
+        row[:, 1:] += running
+        np.less(row[:, :-1], best_prev, out=left)  # left strictly cheaper than both
+        d = direction[:, i]  # predecessor of each cell: bit 1 left, else bit 0 up, else diagonal
+        np.add(left.view(np.uint8), left.view(np.uint8), out=d)
+        np.bitwise_or(d, up.view(np.uint8), out=d)
+        prev, row = row, prev
+        row[:, 0] = np.inf  # D[i, -1]: only D[-1, -1] is the origin
+    drift, total, length = _dtw_backtrack(p, g, direction)
     return drift, total / length
 
 
-def _dtw_backtrack(p: npt.NDArray[np.float64], g: npt.NDArray[np.float64], acc: npt.NDArray[np.float32]
+def _dtw_backtrack(p: npt.NDArray[np.float64], g: npt.NDArray[np.float64], direction: npt.NDArray[np.uint8]
                    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Walk every optimal path of a block back from (T-1, G-1) to (0, 0) together.
 
-    Each step goes to the cheapest of the three predecessors in the accumulated table (the
-    diagonal first on ties, as textbook DTW does) and measures its cell exactly in float64.
+    Each cell names its predecessor in ``direction`` (B, T, G); each visited cell is measured
+    exactly in float64.
 
     Returns:
         (drift, total, length): (B, T) mean distance of the cells aligned to each predicted
@@ -295,16 +293,19 @@ def _dtw_backtrack(p: npt.NDArray[np.float64], g: npt.NDArray[np.float64], acc: 
             break
         r, i, j = rows[active], bi[active], bj[active]
         d = np.linalg.norm(p[r, i] - g[j], axis=-1)
-        drift_sum[r, i] += d
+        drift_sum[r, i] += d  # each rollout appears once per step: no repeated index
         total[r] += d
         drift_cnt[r, i] += 1
         length[r] += 1
         done = (i == 0) & (j == 0)
-        # predecessors of cell (i, j) sit at acc[i, j] (diagonal), acc[i, j+1] (above), acc[i+1, j] (left)
-        options = np.stack([acc[r, i, j], acc[r, i, j + 1], acc[r, i + 1, j]])
-        move = np.argmin(options, axis=0)
-        bi[r] = np.where(done, -1, i - (move != 2))
-        bj[r] = np.where(done, -1, j - (move != 1))
+        code = direction[r, i, j]
+        left = (code & _LEFT_BIT) != 0
+        up = ~left & ((code & _UP_BIT) != 0)
+        # along the table's first row only a left move stays inside it, along its first column up
+        left = (i == 0) | (left & (j != 0))
+        up = (j == 0) | (up & (i != 0))
+        bi[r] = np.where(done, -1, i - (~left).astype(np.int64))
+        bj[r] = np.where(done, -1, j - (~up).astype(np.int64))
     return drift_sum / np.maximum(drift_cnt, 1), total, length
 
 
@@ -312,20 +313,66 @@ def _dtw_backtrack(p: npt.NDArray[np.float64], g: npt.NDArray[np.float64], acc: 
 # Limits, end effector, video
 
 
-def limit_violations(values: npt.ArrayLike, limits: npt.ArrayLike) -> npt.NDArray[np.bool_]:
-    """(..., 6) True where a joint lies outside its [lower, upper] limit (both in data units)."""
+def limit_violations(values: npt.ArrayLike, limits: npt.ArrayLike, margin: npt.ArrayLike = 0.0
+                     ) -> npt.NDArray[np.bool_]:
+    """(..., 6) True where a joint lies more than ``margin`` outside its [lower, upper] limit.
+
+    Args:
+        values: (..., 6) joint values, data units.
+        limits: (6, 2) lower / upper limits, data units.
+        margin: scalar or (6,) tolerance past each limit, data units (see
+            :func:`inspector.units.limit_margin_in_units`).
+    """
+    return limit_excess(values, limits) > np.asarray(margin, np.float64)
+
+
+def limit_excess(values: npt.ArrayLike, limits: npt.ArrayLike) -> Array:
+    """(..., 6) how far each joint lies past its nearest limit (0 inside the range), data units."""
     v = np.asarray(values, np.float64)
     lim = np.asarray(limits, np.float64)
-    return (v < lim[:, 0]) | (v > lim[:, 1])
+    return np.maximum(np.maximum(lim[:, 0] - v, v - lim[:, 1]), 0.0)
+
+
+@dataclass
+class LimitSummary:
+    """Joint-limit violations of a run of samples, one definition everywhere it is shown.
+
+    Attributes:
+        count: joint-samples past a limit (beyond the margin), all joints together.
+        steps: samples with any joint past a limit.
+        by_joint: (6,) joint-samples per joint.
+        max_excess: (6,) largest distance past the limit per joint among its violations (0 for
+            a joint without any), data units.
+    """
+
+    count: int
+    steps: int
+    by_joint: npt.NDArray[np.int64]
+    max_excess: Array
+
+    @classmethod
+    def of(cls, violation: npt.NDArray[np.bool_], excess: Array) -> "LimitSummary":
+        """From (T, 6) violation flags and (T, 6) excess."""
+        by_joint = violation.sum(axis=0).astype(np.int64)
+        max_excess = np.where(violation, excess, 0.0).max(axis=0) if len(excess) else np.zeros(excess.shape[-1])
+        return cls(int(by_joint.sum()), int(violation.any(axis=1).sum()), by_joint, max_excess)
 
 
 def psnr(pred: npt.ArrayLike, gt: npt.ArrayLike) -> Array:
-    """(N,) PSNR [dB] of (N, H, W, 3) uint8 frames (peak 255); GT must already match in size."""
-    p, g = np.asarray(pred), np.asarray(gt)
-    # integer arithmetic: exact, and far cheaper than float64 on 8-bit frames
-    diff = np.subtract(p, g, dtype=np.int16).reshape(len(p), -1)
-    sq_sum = np.einsum("ij,ij->i", diff, diff, dtype=np.int64)
-    mse = np.maximum(sq_sum / diff.shape[1], 1e-10)
+    """(N,) PSNR [dB] of (N, H, W, 3) uint8 frames (peak 255); GT must already match in size.
+
+    Exact integer arithmetic on narrow types: ``|p - g|`` in uint8, its square in uint16 (at most
+    65025), row sums in uint32 (a row of under 22,000 pixels cannot overflow), frame sums in uint64.
+    """
+    p, g = np.asarray(pred, np.uint8), np.asarray(gt, np.uint8)
+    diff = np.maximum(p, g)
+    diff -= np.minimum(p, g)
+    sq = diff.astype(np.uint16)
+    sq *= sq
+    n = len(p)
+    rows = sq.reshape(n, p.shape[1], -1).sum(axis=2, dtype=np.uint32)
+    sq_sum = rows.sum(axis=1, dtype=np.uint64).astype(np.float64)
+    mse = np.maximum(sq_sum / (sq.size // max(n, 1)), 1e-10)
     return 10.0 * np.log10(255.0 ** 2 / mse)
 
 
@@ -333,40 +380,35 @@ def ssim(pred: npt.ArrayLike, gt: npt.ArrayLike) -> Array:
     """(N,) SSIM of (N, H, W, 3) uint8 frames on luma, 11x11 Gaussian window (sigma 1.5).
 
     The window is separable, so each local mean is two 11-tap passes instead of one 121-tap
-    pass; float32 is ample for 8-bit frames.
+    pass ("valid" windows only, as in the reference definition); float32 is ample for 8-bit frames.
     """
-    def luma(x: npt.ArrayLike) -> torch.Tensor:
-        t = torch.as_tensor(np.asarray(x)).to(torch.float32)
-        return 0.299 * t[..., 0] + 0.587 * t[..., 1] + 0.114 * t[..., 2]
+    def luma(x: npt.ArrayLike) -> npt.NDArray[np.float32]:
+        f = np.asarray(x, np.float32)
+        return 0.299 * f[..., 0] + 0.587 * f[..., 1] + 0.114 * f[..., 2]
 
     x, y = luma(pred), luma(gt)
-    coords = torch.arange(11, dtype=torch.float32) - 5
-    g1 = torch.exp(-(coords ** 2) / (2 * 1.5 ** 2))
-    g1 = g1 / g1.sum()
-    # the five local moments of each frame go through the blur together, as channels
-    stack = torch.stack([x, y, x * x, y * y, x * y], dim=1)  # (N, 5, H, W)
-    vertical = g1.view(1, 1, 11, 1).repeat(5, 1, 1, 1)
-    horizontal = g1.view(1, 1, 1, 11).repeat(5, 1, 1, 1)
-    out = []
-    for block in torch.split(stack, 32):
-        m = torch.nn.functional.conv2d(torch.nn.functional.conv2d(block, vertical, groups=5), horizontal, groups=5)
-        mx, my, exx, eyy, exy = m.unbind(dim=1)
-        c1, c2 = (0.01 * 255) ** 2, (0.03 * 255) ** 2
+    coords = np.arange(11, dtype=np.float32) - 5
+    g1 = np.exp(-(coords ** 2) / (2 * 1.5 ** 2))
+    g1 /= g1.sum()
+    c1, c2 = (0.01 * 255) ** 2, (0.03 * 255) ** 2
+    out = np.empty(len(x))
+    for n in range(len(x)):  # frame by frame: five moment images of one frame at a time
+        moments = np.stack([x[n], y[n], x[n] * x[n], y[n] * y[n], x[n] * y[n]])  # (5, H, W)
+        mx, my, exx, eyy, exy = _blur_valid(_blur_valid(moments, g1, axis=1), g1, axis=2)
         sxx, syy, sxy = exx - mx ** 2, eyy - my ** 2, exy - mx * my
         s = ((2 * mx * my + c1) * (2 * sxy + c2)) / ((mx ** 2 + my ** 2 + c1) * (sxx + syy + c2))
-        out.append(s.mean(dim=(1, 2)).to(torch.float64))
-    return torch.cat(out).numpy()
+        out[n] = float(s.mean(dtype=np.float64))
+    return out
 
 
-def resize_frames(frames: npt.ArrayLike, height: int, width: int) -> npt.NDArray[np.uint8]:
-    """(N, h, w, 3) uint8 -> (N, height, width, 3) uint8, antialiased bilinear."""
-    f = np.asarray(frames)
-    if f.shape[1:3] == (height, width):
-        return f
-    t = torch.as_tensor(f).permute(0, 3, 1, 2).to(torch.float32)
-    t = torch.nn.functional.interpolate(t, size=(height, width), mode="bilinear", antialias=True,
-                                        align_corners=False)
-    return t.round().clamp(0, 255).to(torch.uint8).permute(0, 2, 3, 1).numpy()
+def _blur_valid(a: npt.NDArray[np.float32], taps: npt.NDArray[np.float32], axis: int) -> npt.NDArray[np.float32]:
+    """Correlate ``a`` with ``taps`` along ``axis``, keeping only the fully covered positions."""
+    k = len(taps)
+    n = a.shape[axis] - k + 1
+    out = np.zeros(a.shape[:axis] + (n,) + a.shape[axis + 1:], np.float32)
+    for i, w in enumerate(taps):
+        out += w * np.take(a, np.arange(i, i + n), axis=axis)
+    return out
 
 
 # ----------------------------------------------------------------------------------------------

@@ -1,103 +1,80 @@
-"""``inspector report``: drift metrics per rollout and over the set, as tables or JSON."""
+"""``inspector report``: drift metrics per rollout and over the set, as tables or JSON.
+
+The work streams: rollouts are read by worker processes (``--jobs``, default one per core) a task
+at a time (:mod:`inspector.report_jobs`) and only their summary rows come back, so memory
+follows a task, not the evaluation. Rows are kept in the metrics cache (:mod:`inspector.cache`):
+a second report on unchanged rollouts reads them instead of decoding videos again.
+"""
 
 from __future__ import annotations
 
+import sys
 from typing import Any, Sequence
 
 import numpy as np
 
-from . import metrics
+from .errors import InspectorError
+from .report_jobs import default_jobs, plan_tasks, run_tasks
+from .report_row import aggregate, prompt_divergence_record, prompt_pairs
 from .sources import open_sources
-from .timeline import RolloutTimeline, build_timeline
-from .units import JOINT_NAMES
+from .units import DEFAULT_LIMIT_MARGIN_DEG, JOINT_NAMES
 
 
-def _in_episode(tl: RolloutTimeline, series: np.ndarray) -> np.ndarray:
-    """The samples of a (T,) series before the real episode's end (all of them if none are)."""
-    inside = series if tl.post_episode is None else series[~tl.post_episode]
-    return inside if inside.size else series
-
-
-def _drift_summary(tl: RolloutTimeline, series: np.ndarray | None) -> dict[str, Any] | None:
-    """mean / final over in-episode samples, plus the per-chunk means (all samples)."""
-    if series is None:
-        return None
-    inside = _in_episode(tl, series)
-    per_chunk = tl.per_chunk(series)
-    return {"mean": float(inside.mean()), "final": float(inside[-1]),
-            "per_chunk": [round(float(v), 6) for v in per_chunk]}
-
-
-def rollout_summary(tl: RolloutTimeline) -> dict[str, Any]:
-    """The JSON record of one rollout (fields needing GT joints are null without them)."""
-    r = tl.rollout
-    ce = tl.chunk_errors
-    post_chunks = None
-    if tl.episode_end_step is not None:
-        post_chunks = int((tl.chunk_start_step >= tl.episode_end_step).sum())
-    elif tl.has_gt_joints or tl.gt.episode_length is not None:
-        post_chunks = 0
-    ee = None
-    if tl.ee_error_mm is not None:
-        inside = _in_episode(tl, tl.ee_error_mm)
-        ee = {"mean": float(inside.mean()), "final": float(inside[-1])}
-    psnr = {view: vm.mean_psnr_db for view, vm in tl.all_video_metrics().items()
-            if vm.mean_psnr_db is not None}
-    by_joint = tl.limit_violation.sum(axis=0)
-    return {
-        "tag": r.tag,
-        "session": r.session.name if r.session is not None else None,
-        "kind": r.kind,
-        "prompt": r.prompt,
-        "episode_index": r.episode_index,
-        "units": tl.units.label(),
-        "rmse_deg": ce.rmse if ce is not None else None,
-        "per_joint_rmse": ce.per_joint_rmse.tolist() if ce is not None else None,
-        "per_step_mse": ce.per_step_mse.tolist() if ce is not None else None,
-        "time_aligned_drift": _drift_summary(tl, tl.time_aligned_drift),
-        "best_match_drift": _drift_summary(tl, tl.best_match_drift),
-        "dtw_drift": _drift_summary(tl, tl.dtw_drift),
-        "tempo": tl.tempo,
-        "ee_error_mm": ee,
-        "limit_violations": {"count": int(by_joint.sum()),
-                             "by_joint": {j: int(c) for j, c in zip(JOINT_NAMES, by_joint)}},
-        "video_psnr_db": psnr,
-        "post_episode_chunks": post_chunks,
-        "gt_source": tl.gt.source,
-    }
-
-
-def build_report(paths: Sequence[str], dataset: str | None = None) -> dict[str, Any]:
+def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | None = None,
+                 use_cache: bool = True, limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG,
+                 cache_dir: str | None = None, progress: bool | None = None) -> dict[str, Any]:
     """Metrics for every rollout under ``paths``; broken rollouts are listed under ``errors``.
+
+    Args:
+        paths: sessions, rollout directories or DreamZero-SO101 output directories.
+        dataset: a LeRobot dataset with the GT episodes, for sessions that name none.
+        jobs: worker processes (default: one per core; 1 computes in this process).
+        use_cache: read and write the metrics cache.
+        limit_margin_deg: tolerance past a joint limit before it counts as a violation [deg].
+        cache_dir: the metrics cache directory (default: the user's cache directory).
+        progress: a progress bar on stderr (default: when stderr is a terminal).
 
     Raises:
         InspectorError: a path is unusable, or no rollout under ``paths`` could be reported (none
             at all, or every one broken: the first one's error, counting the others).
     """
-    sources = open_sources(paths, dataset=dataset)
+    jobs = default_jobs() if jobs is None else max(1, jobs)
+    sources = open_sources(paths, dataset=dataset, lazy=True)  # arrays are read by the workers
     try:
-        rows: list[dict[str, Any]] = []
-        timelines: list[RolloutTimeline] = []
+        names = {str(s.root): s.name for s in sources.sessions}
         failed = [err for s in sources.sessions for _, err in sorted(s.errors.items())]
         errors = {f"{s.name}/{tag}": str(err) for s in sources.sessions for tag, err in s.errors.items()}
-        from .errors import InspectorError
-
-        for session, rollout in sources.rollouts():
-            try:
-                tl = build_timeline(rollout)
-                rows.append(rollout_summary(tl))
-                timelines.append(tl)
-            except InspectorError as exc:
-                errors[f"{session.name}/{rollout.tag}"] = str(exc)
-                failed.append(exc)
+        order = {(str(s.root), tag): i for i, (s, tag) in enumerate(
+            (s, tag) for s in sources.sessions for tag in sorted(s.rollouts))}
+        tasks = plan_tasks(sources.sessions, jobs, limit_margin_deg, cache_dir, use_cache)
+        rows: dict[tuple[str, str], dict[str, Any]] = {}
+        bar = _progress_bar(len(order), progress)
+        n_cached = 0
+        for outcomes in run_tasks(tasks, jobs):
+            for o in outcomes:
+                if o.row is not None:
+                    rows[(o.session_root, o.tag)] = o.row
+                    n_cached += o.cached
+                else:
+                    err = InspectorError(o.error_file or o.tag, o.error or "failed")
+                    errors[f"{names[o.session_root]}/{o.tag}"] = str(err)
+                    failed.append(err)
+            if bar is not None:
+                bar.update(len(outcomes))
+        if bar is not None:
+            bar.close()
+            print(f"inspector: {len(rows)} rollout(s) reported ({n_cached} from the metrics cache)"
+                  + (f", {len(errors)} with errors" if errors else ""), file=sys.stderr)
         if not rows:
             if not failed:
                 where = ", ".join(str(s.root) for s in sources.sessions) or ", ".join(map(str, paths))
                 raise InspectorError(where, "no rollouts to report")
             more = f" ({len(failed) - 1} more broken rollout(s))" if len(failed) > 1 else ""
             raise InspectorError(failed[0].file, failed[0].what + more)
-        report: dict[str, Any] = {"rollouts": rows, "aggregate": _aggregate(rows)}
-        divergences = _prompt_pairs(timelines)
+        keys = sorted(rows, key=order.__getitem__)
+        ordered = [rows[k] for k in keys]
+        report: dict[str, Any] = {"rollouts": ordered, "aggregate": aggregate(ordered)}
+        divergences = _prompt_divergences(sources, keys, rows)
         if divergences:
             report["prompt_divergence"] = divergences
         if errors:
@@ -107,36 +84,29 @@ def build_report(paths: Sequence[str], dataset: str | None = None) -> dict[str, 
         sources.close()
 
 
-def _aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    rmse = metrics.aggregate([r["rmse_deg"] for r in rows if r["rmse_deg"] is not None])
-    psnr = [v for r in rows for v in r["video_psnr_db"].values()]
-    return {
-        "n": len(rows),
-        "mean_rmse_deg": rmse["mean"],
-        "median_rmse_deg": rmse["median"],
-        "best_rmse_deg": rmse["best"],
-        "worst_rmse_deg": rmse["worst"],
-        "mean_video_psnr_db": float(np.mean(psnr)) if psnr else None,
-    }
-
-
-def _prompt_pairs(timelines: list[RolloutTimeline]) -> list[dict[str, Any]]:
-    """Autoregressive rollouts of one session and episode with different prompts, compared pairwise."""
+def _prompt_divergences(sources, keys: list[tuple[str, str]], rows: dict) -> list[dict[str, Any]]:
+    """Training vs novel prompt (and any other prompt pairs) from the same start."""
+    sessions = {str(s.root): s for s in sources.sessions}
+    entries = [(key, (key[0], rows[key]["episode_index"], rows[key]["start_frame"]), key[1], rows[key]["prompt"])
+               for key in keys if rows[key]["kind"] == "autoregressive"]
     out = []
-    auto = [t for t in timelines if t.kind == "autoregressive"]
-    for i, a in enumerate(auto):
-        for b in auto[i + 1:]:
-            ra, rb = a.rollout, b.rollout
-            same_start = (ra.session is rb.session and ra.episode_index == rb.episode_index
-                          and ra.start_frame == rb.start_frame)
-            if not same_start or ra.prompt == rb.prompt:
-                continue
-            _, per_chunk, collapse = metrics.prompt_divergence(a.pred, b.pred, a.executed_per_chunk)
-            out.append({"a": ra.tag, "b": rb.tag, "prompt_a": ra.prompt, "prompt_b": rb.prompt,
-                        "mean": float(per_chunk.mean()), "max": float(per_chunk.max()),
-                        "per_chunk": [round(float(v), 6) for v in per_chunk],
-                        "collapse_chunk": collapse})
+    for (root_a, tag_a), (root_b, tag_b) in prompt_pairs(entries):
+        a, b = sessions[root_a].rollouts[tag_a], sessions[root_b].rollouts[tag_b]
+        out.append(prompt_divergence_record(a, b))
+        a.release_arrays()
+        b.release_arrays()
     return out
+
+
+def _progress_bar(total: int, show: bool | None):
+    """A tqdm bar on stderr (by default only when stderr is a terminal)."""
+    if show is None:
+        show = sys.stderr.isatty()
+    if not show or total == 0:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="rollout", desc="report", file=sys.stderr, leave=False)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -153,42 +123,50 @@ def format_report(report: dict[str, Any]) -> str:
     lines: list[str] = []
     single = [r for r in rows if r["kind"] == "single_chunk"]
     auto = [r for r in rows if r["kind"] == "autoregressive"]
+    views = sorted({v for r in rows for v in r["video_psnr_db"]})
+    psnr_head = "".join(f" {'PSNR ' + v:>11}" for v in views)
+    width = max([18] + [len(r["tag"]) for r in rows])
+
+    def psnr_cells(r: dict[str, Any]) -> str:
+        return "".join(f" {_f(r['video_psnr_db'].get(v), '.1f'):>11}" for v in views)
+
     if single:
-        lines += ["Single-chunk predictions (24 actions vs logged GT)",
-                  f"{'rollout':<18} {'RMSE deg':>9} {'worst joint':>16} {'step0 MSE':>10} {'last MSE':>9} "
-                  f"{'limits':>6} {'PSNR dB':>8}  prompt"]
+        lines += ["Single-chunk predictions (each chunk's horizon vs logged GT)",
+                  f"{'rollout':<{width}} {'RMSE deg':>9} {'worst joint (RMSE)':>20} {'step0 MSE':>10} "
+                  f"{'last MSE':>9} {'lim.steps':>9}{psnr_head}  prompt"]
         for r in single:
             worst = "-"
             if r["per_joint_rmse"] is not None:
                 k = int(np.argmax(r["per_joint_rmse"]))
                 worst = f"{JOINT_NAMES[k]} {r['per_joint_rmse'][k]:.2f}"
-            psnr = r["video_psnr_db"].get("front", next(iter(r["video_psnr_db"].values()), None))
             mse = r["per_step_mse"]
-            lines.append(f"{r['tag']:<18} {_f(r['rmse_deg'], '.3f'):>9} {worst:>16} "
+            lines.append(f"{r['tag']:<{width}} {_f(r['rmse_deg'], '.3f'):>9} {worst:>20} "
                          f"{_f(mse[0] if mse else None):>10} {_f(mse[-1] if mse else None):>9} "
-                         f"{r['limit_violations']['count']:>6} {_f(psnr):>8}  {r['prompt']}")
+                         f"{r['limit_violations']['steps']:>9}{psnr_cells(r)}  {r['prompt']}")
         lines.append("")
     if auto:
         lines += ["Autoregressive rollouts (drift in data units; post-episode samples excluded)",
-                  f"{'rollout':<18} {'chunks':>6} {'time-al.':>9} {'final':>8} {'best-m.':>8} {'DTW':>7} "
-                  f"{'tempo':>6} {'EE mm':>7} {'post':>5} {'limits':>6} {'PSNR':>6}  prompt"]
+                  f"{'rollout':<{width}} {'chunks':>6} {'time-al.':>9} {'final':>8} {'best-m.':>8} {'DTW':>7} "
+                  f"{'tempo':>6} {'EE mm':>7} {'post':>5} {'lim.steps':>9}{psnr_head}  prompt"]
         for r in auto:
             ta, bm, dtw = r["time_aligned_drift"], r["best_match_drift"], r["dtw_drift"]
-            n = len(ta["per_chunk"]) if ta else "-"
-            psnr = r["video_psnr_db"]
             lines.append(
-                f"{r['tag']:<18} {n:>6} {_f(ta and ta['mean']):>9} {_f(ta and ta['final']):>8} "
+                f"{r['tag']:<{width}} {r['n_chunks']:>6} {_f(ta and ta['mean']):>9} {_f(ta and ta['final']):>8} "
                 f"{_f(bm and bm['mean']):>8} {_f(dtw and dtw['mean']):>7} {_f(r['tempo']):>6} "
                 f"{_f(r['ee_error_mm'] and r['ee_error_mm']['mean'], '.1f'):>7} "
-                f"{_f(r['post_episode_chunks'], 'd'):>5} {r['limit_violations']['count']:>6} "
-                f"{_f(np.mean(list(psnr.values())) if psnr else None, '.1f'):>6}  {r['prompt']}")
+                f"{_f(r['post_episode_chunks'], 'd'):>5} {r['limit_violations']['steps']:>9}{psnr_cells(r)}"
+                f"  {r['prompt']}")
         if any(r["time_aligned_drift"] is None for r in auto):
             lines.append("  ('-': no GT joints; import with --dataset ROOT to measure drift)")
         lines.append("")
+    margin = rows[0]["limit_violations"]["margin_deg"] if rows else DEFAULT_LIMIT_MARGIN_DEG
+    lines.append(f"lim.steps: steps with any joint more than {margin:g} deg past its URDF limit; "
+                 f"PSNR [dB]: imagined vs GT frames of that camera")
     agg = report["aggregate"]
+    psnr = ", ".join(f"{v} {m:.2f}" for v, m in agg["mean_video_psnr_db"].items()) or "-"
     lines.append(f"Aggregate over {agg['n']} rollouts: RMSE mean {_f(agg['mean_rmse_deg'], '.3f')}, "
                  f"median {_f(agg['median_rmse_deg'], '.3f')}, best {_f(agg['best_rmse_deg'], '.3f')}, "
-                 f"worst {_f(agg['worst_rmse_deg'], '.3f')} deg; mean PSNR {_f(agg['mean_video_psnr_db'])} dB")
+                 f"worst {_f(agg['worst_rmse_deg'], '.3f')} deg; mean PSNR per view [dB]: {psnr}")
     for p in report.get("prompt_divergence", []):
         collapse = "never" if p["collapse_chunk"] is None else f"from chunk {p['collapse_chunk']}"
         lines.append(f"Prompt divergence {p['a']} vs {p['b']}: mean {p['mean']:.2f}, max {p['max']:.2f}; "

@@ -31,6 +31,7 @@ import os
 import re
 import shutil
 import tempfile
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Literal, Mapping
@@ -67,13 +68,17 @@ ABSURD_VALUE = 1e100
 
 @dataclass
 class Rollout:
-    """One rollout of a session, validated on load (arrays memory-mapped, videos decoded lazily).
+    """One rollout of a session, validated on load (videos are streamed when read).
+
+    Arrays are read when first used (their shapes are checked on load; values on first use), so a
+    session of thousands of rollouts opens without holding their arrays.
 
     Attributes:
         actions: (n_chunks, horizon, 6) predicted chunks, dataset units, JOINT_NAMES order.
         states: (n_chunks + 1, 6) or None.
         gt_actions: (T, 6) GT joints from ``start_frame`` on, or None (then the session's
             dataset may supply them).
+        actions_shape: ``actions.shape``, known without reading the array.
     """
 
     root: Path
@@ -88,22 +93,39 @@ class Rollout:
     frames_per_chunk: int
     views: list[str]
     units: Units
-    actions: npt.NDArray[np.float64]
-    states: npt.NDArray[np.float64] | None = None
-    gt_actions: npt.NDArray[np.float64] | None = None
+    actions_shape: tuple[int, ...]
     gt_views: list[str] = field(default_factory=list)
     gt_episode_length: int | None = None
     extra: dict[str, Any] = field(default_factory=dict)  # importer provenance, reference metrics
     session: "Session | None" = None
-    _clips: dict[tuple[str, str], VideoClip] = field(default_factory=dict, repr=False)
+    _arrays: dict[str, "NpyFile"] = field(default_factory=dict, repr=False)
+
+    @property
+    def actions(self) -> npt.NDArray[np.float64]:
+        return self._arrays["actions"].load()
+
+    @property
+    def states(self) -> npt.NDArray[np.float64] | None:
+        f = self._arrays.get("states")
+        return None if f is None else f.load()
+
+    @property
+    def gt_actions(self) -> npt.NDArray[np.float64] | None:
+        f = self._arrays.get("gt_actions")
+        return None if f is None else f.load()
 
     @property
     def n_chunks(self) -> int:
-        return int(self.actions.shape[0])
+        return int(self.actions_shape[0])
 
     @property
     def has_gt_joints(self) -> bool:
-        return self.gt_actions is not None
+        return "gt_actions" in self._arrays
+
+    def release_arrays(self) -> None:
+        """Let go of the arrays read so far (they are read again when next used)."""
+        for f in self._arrays.values():
+            f.release()
 
     @property
     def steps_per_chunk(self) -> int:
@@ -120,24 +142,11 @@ class Rollout:
         return base / f"{view}.mp4"
 
     def video(self, view: str, gt: bool = False) -> VideoClip:
-        """The imagined (or carried GT) clip of ``view``, decoded once and cached.
-
-        A carried GT clip is decoded straight to the imagined clip's size (when that view has
-        one), which is what every comparison and every side-by-side display wants.
-        """
+        """The imagined (or carried GT) clip of ``view``; nothing is decoded until it is read."""
         known = self.gt_views if gt else self.views
         if view not in known:
             raise InspectorError(self.root / ROLLOUT_FILE, f"no {'GT ' if gt else ''}view {view!r}; views: {known}")
-        key = ("gt" if gt else "pred", view)
-        if key not in self._clips:
-            size = None
-            if gt and view in self.views:
-                from .video import probe
-
-                info = probe(self.video_path(view))
-                size = (info.width, info.height)
-            self._clips[key] = VideoClip(self.video_path(view, gt), size=size)
-        return self._clips[key]
+        return VideoClip(self.video_path(view, gt))
 
 
 @dataclass
@@ -190,7 +199,7 @@ def read_json_object(path: Path) -> dict[str, Any]:
     return data
 
 
-def open_session(root: str | Path, check: Callable[[Path], None] | None = None) -> Session:
+def open_session(root: str | Path, check: Callable[[Path], None] | None = None, lazy: bool = False) -> Session:
     """Read ``session.json`` and every rollout under ``rollouts/`` (bad ones go to ``errors``).
 
     Args:
@@ -199,9 +208,39 @@ def open_session(root: str | Path, check: Callable[[Path], None] | None = None) 
             an :class:`InspectorError` it raises refuses the session (for ``session.json``) or
             that rollout (it goes to ``errors``). The app uses it to refuse symbolic links that
             lead outside the served roots (``inspector.sources.check_confined``).
+        lazy: read the rollouts' arrays on first use (see :func:`load_rollout`).
 
     Raises:
         InspectorError: ``session.json`` itself is missing or invalid (or refused by ``check``).
+    """
+    session = read_session(root, check)
+    for child in rollout_dirs(session.root):
+        try:
+            if check is not None:
+                check(child)
+            rollout = load_rollout(child, session.units, lazy=lazy)
+            rollout.session = session
+            session.rollouts[child.name] = rollout
+        except InspectorError as exc:
+            session.errors[child.name] = exc
+    return session
+
+
+def rollout_dirs(root: Path) -> list[Path]:
+    """The rollout directories of a session, by name (write-in-progress directories skipped)."""
+    rollouts_dir = root / ROLLOUTS_DIR
+    require(not rollouts_dir.exists() or rollouts_dir.is_dir(), rollouts_dir, "expected a directory")
+    if not rollouts_dir.is_dir():
+        return []
+    # dot-directories are temporary directories of a write in progress
+    return [c for c in sorted(rollouts_dir.iterdir()) if not c.name.startswith(".") and c.is_dir()]
+
+
+def read_session(root: str | Path, check: Callable[[Path], None] | None = None) -> Session:
+    """``session.json`` alone, validated: a :class:`Session` with no rollouts read.
+
+    Raises:
+        InspectorError: ``session.json`` is missing or invalid (or refused by ``check``).
     """
     root = Path(root)
     meta_path = root / SESSION_FILE
@@ -224,7 +263,7 @@ def open_session(root: str | Path, check: Callable[[Path], None] | None = None) 
     dataset = meta.get("gt_source", {}).get("dataset")
     require(dataset is None or (isinstance(dataset, str) and "\x00" not in dataset), meta_path,
             f"gt_source.dataset: expected a path string, found {dataset!r}")
-    session = Session(
+    return Session(
         root=root,
         name=str(meta.get("name", root.name)),
         robot=robot,
@@ -233,29 +272,16 @@ def open_session(root: str | Path, check: Callable[[Path], None] | None = None) 
         gt_source=dict(meta.get("gt_source", {})),
         model=dict(meta.get("model", {})),
     )
-    rollouts_dir = root / ROLLOUTS_DIR
-    require(not rollouts_dir.exists() or rollouts_dir.is_dir(), rollouts_dir, "expected a directory")
-    if rollouts_dir.is_dir():
-        for child in sorted(rollouts_dir.iterdir()):
-            if child.name.startswith(".") or not child.is_dir():
-                continue  # temporary directories of a write in progress
-            try:
-                if check is not None:
-                    check(child)
-                rollout = load_rollout(child, units)
-                rollout.session = session
-                session.rollouts[child.name] = rollout
-            except InspectorError as exc:
-                session.errors[child.name] = exc
-    return session
 
 
-def load_rollout(root: str | Path, units: Units | None = None) -> Rollout:
+def load_rollout(root: str | Path, units: Units | None = None, lazy: bool = False) -> Rollout:
     """Read and validate one rollout directory.
 
     Args:
         root: ``rollouts/<tag>``.
         units: the session's units (default: read the parent session, else degrees).
+        lazy: check the arrays' shapes now but read their values on first use (a bad value then
+            raises there); by default they are read and checked now.
 
     Raises:
         InspectorError: naming the file and the field at fault.
@@ -314,18 +340,19 @@ def load_rollout(root: str | Path, units: Units | None = None) -> Rollout:
     require(gt_len is None or (isinstance(gt_len, int) and not isinstance(gt_len, bool) and gt_len > 0),
             meta_path, f"gt.episode_length: expected a positive integer, found {gt_len!r}")
 
-    actions = load_array(root / ACTIONS_FILE, ("n_chunks", horizon, len(JOINT_NAMES)))
-    require(actions.shape[0] >= 1, root / ACTIONS_FILE, "no chunks (shape[0] == 0)")
+    arrays = {"actions": NpyFile(root / ACTIONS_FILE, ("n_chunks", horizon, len(JOINT_NAMES)))}
+    n_chunks = arrays["actions"].shape[0]
+    require(n_chunks >= 1, root / ACTIONS_FILE, "no chunks (shape[0] == 0)")
     if kind == "single_chunk":
-        require(actions.shape[0] == 1, root / ACTIONS_FILE,
-                f"single_chunk rollout: expected 1 chunk, found {actions.shape[0]}")
-    states = None
+        require(n_chunks == 1, root / ACTIONS_FILE, f"single_chunk rollout: expected 1 chunk, found {n_chunks}")
     if (root / STATES_FILE).exists():
-        states = load_array(root / STATES_FILE, (actions.shape[0] + 1, len(JOINT_NAMES)))
-    gt_actions = None
+        arrays["states"] = NpyFile(root / STATES_FILE, (n_chunks + 1, len(JOINT_NAMES)))
     if (root / GT_DIR / ACTIONS_FILE).exists():
-        gt_actions = load_array(root / GT_DIR / ACTIONS_FILE, ("T", len(JOINT_NAMES)))
-        require(gt_actions.shape[0] >= 1, root / GT_DIR / ACTIONS_FILE, "no GT steps (shape[0] == 0)")
+        arrays["gt_actions"] = NpyFile(root / GT_DIR / ACTIONS_FILE, ("T", len(JOINT_NAMES)))
+        require(arrays["gt_actions"].shape[0] >= 1, root / GT_DIR / ACTIONS_FILE, "no GT steps (shape[0] == 0)")
+    if not lazy:
+        for f in arrays.values():
+            f.load()
     for view in views:
         require((root / VIDEO_DIR / f"{view}.mp4").is_file(), root / VIDEO_DIR / f"{view}.mp4",
                 f"imagined video for view {view!r} not found")
@@ -337,10 +364,60 @@ def load_rollout(root: str | Path, units: Units | None = None) -> Rollout:
     return Rollout(
         root=root, tag=root.name, kind=kind, prompt=prompt, episode_index=episode_index,
         start_frame=start_frame, fps=fps, horizon=horizon, executed_per_chunk=executed,
-        frames_per_chunk=frames_per_chunk, views=list(views), units=units, actions=actions,
-        states=states, gt_actions=gt_actions, gt_views=list(gt_views), gt_episode_length=gt_len,
-        extra=extra,
+        frames_per_chunk=frames_per_chunk, views=list(views), units=units,
+        actions_shape=arrays["actions"].shape, gt_views=list(gt_views), gt_episode_length=gt_len,
+        extra=extra, _arrays=arrays,
     )
+
+
+class NpyFile:
+    """A numeric ``.npy`` file: its header checked now, its values read (and checked) on first use.
+
+    Args:
+        path: the file.
+        shape: expected shape; a string entry (e.g. ``"n_chunks"``) matches any size.
+
+    Raises:
+        InspectorError: unreadable, not numeric, or another shape (naming the file).
+    """
+
+    def __init__(self, path: Path, shape: tuple[int | str, ...]) -> None:
+        self.path = path
+        self.shape: tuple[int, ...] = _read_npy_header(path, shape)
+        self._values: npt.NDArray[np.float64] | None = None
+        self._lock = threading.Lock()
+
+    def load(self) -> npt.NDArray[np.float64]:
+        """The values as float64, checked (finite, not absurd); kept until :meth:`release`."""
+        with self._lock:
+            if self._values is None:
+                self._values = load_array(self.path, self.shape)
+            return self._values
+
+    def release(self) -> None:
+        with self._lock:
+            self._values = None
+
+
+def _read_npy_header(path: Path, shape: tuple[int | str, ...]) -> tuple[int, ...]:
+    """The shape in a ``.npy`` header, checked against ``shape`` and a numeric dtype."""
+    if not path.is_file():
+        raise InspectorError(path, "file not found")
+    try:
+        mapped = np.load(path, mmap_mode="r", allow_pickle=False)  # reads the header, maps the rest
+        found, dtype = mapped.shape, mapped.dtype
+        del mapped
+    except Exception as exc:
+        raise InspectorError(path, f"not a readable .npy array ({type(exc).__name__}: {exc})") from None
+    require(dtype.kind in "fiu", path, f"expected a numeric array, found dtype {dtype}")
+    _check_shape(path, shape, found)
+    return tuple(int(n) for n in found)
+
+
+def _check_shape(path: Path, expected: tuple[int | str, ...], found: tuple[int, ...]) -> None:
+    pattern = "(" + ", ".join(str(s) for s in expected) + ")"
+    require(len(found) == len(expected) and all(isinstance(e, str) or e == a for e, a in zip(expected, found)),
+            path, f"shape: expected {pattern}, found {tuple(found)}")
 
 
 def load_array(path: Path, shape: tuple[int | str, ...]) -> npt.NDArray[np.float64]:
@@ -361,9 +438,7 @@ def load_array(path: Path, shape: tuple[int | str, ...]) -> npt.NDArray[np.float
         raise InspectorError(path, f"not a readable .npy array ({type(exc).__name__}: {exc})") from None
     require(isinstance(arr, np.ndarray) and arr.dtype.kind in "fiu", path,
             f"expected a numeric array, found dtype {getattr(arr, 'dtype', type(arr).__name__)}")
-    pattern = "(" + ", ".join(str(s) for s in shape) + ")"
-    require(arr.ndim == len(shape) and all(isinstance(e, str) or e == a for e, a in zip(shape, arr.shape)),
-            path, f"shape: expected {pattern}, found {tuple(arr.shape)}")
+    _check_shape(path, shape, arr.shape)
     arr = arr.astype(np.float64, copy=False)
     check_values(arr, path)
     return arr
@@ -595,7 +670,8 @@ class SessionWriter:
 
 
 def _write_video(dest: Path, src: Any, fps: float) -> None:
-    from .video import decode, probe
+    """An H.264 file is copied as it is; any other video, or frames, are encoded frame by frame."""
+    from .video import probe
 
     if isinstance(src, (str, Path)):
         info = probe(src)
@@ -603,8 +679,9 @@ def _write_video(dest: Path, src: Any, fps: float) -> None:
         if info.codec == "h264":
             shutil.copyfile(src, dest)
             return
-        src = decode(src)[0]
-    frames = np.asarray(src)
-    if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8:
-        raise InspectorError(dest, f"video frames: expected (N, H, W, 3) uint8, found {frames.shape} {frames.dtype}")
+        frames: Any = (rgb for _, rgb in VideoClip(Path(src)).iter_frames())
+    else:
+        frames = np.asarray(src)
+        if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8:
+            raise InspectorError(dest, f"video frames: expected (N, H, W, 3) uint8, found {frames.shape} {frames.dtype}")
     encode_h264(dest, frames, fps)

@@ -47,14 +47,18 @@ class Sources:
 
 
 def open_sources(paths: Sequence[str | Path], dataset: str | Path | None = None,
-                 confine: bool = False) -> Sources:
+                 confine: bool = False, lazy: bool = False) -> Sources:
     """Open each path as a session (a rollout path opens its session filtered to that rollout).
+
+    A session named more than once (itself, or several of its rollouts) is opened once, holding
+    every rollout named.
 
     Args:
         paths: sessions, rollout directories, or DreamZero-SO101 source directories.
         dataset: a LeRobot dataset to take GT from when a session names none.
         confine: refuse (as rollout errors, before reading them) rollouts whose directory or any
             file in it resolves outside the session directory; the app serves with this on.
+        lazy: read rollouts' arrays on first use (``open_session(..., lazy=True)``).
 
     Raises:
         InspectorError: a path is missing or is none of the above (or, confined, its
@@ -63,14 +67,15 @@ def open_sources(paths: Sequence[str | Path], dataset: str | Path | None = None,
     out = Sources()
     try:
         for raw in paths:
-            _open_one(out, raw, dataset, confine)
+            _open_one(out, raw, dataset, confine, lazy)
     except BaseException:
         out.close()  # temporary sessions of the paths already opened
         raise
     return out
 
 
-def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine: bool = False) -> None:
+def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine: bool = False,
+              lazy: bool = False) -> None:
     """Open one path of :func:`open_sources` into ``out``."""
     path = Path(os.path.expanduser(raw))  # '~nosuchuser' stays as it is: not found
     if not path.exists():
@@ -79,7 +84,7 @@ def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine
 
     def opened(root: Path) -> Session:
         root = root.resolve()
-        return open_session(root, check=(lambda p: check_confined(p, [root])) if confine else None)
+        return open_session(root, check=(lambda p: check_confined(p, [root])) if confine else None, lazy=lazy)
 
     if is_session(path):
         session = opened(path)
@@ -100,6 +105,11 @@ def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine
         from .lerobot_dataset import find_dataset
 
         session.gt_source["dataset"] = str(find_dataset(dataset))
+    same = next((s for s in out.sessions if s.root.resolve() == session.root.resolve()), None)
+    if same is not None:  # named twice (or two of its rollouts named): one session, their union
+        same.rollouts.update(session.rollouts)
+        same.errors.update(session.errors)
+        return
     out.sessions.append(session)
     out.roots.append(session.root.resolve())
 

@@ -3,6 +3,10 @@
 Time runs over *executed steps*: step ``s`` is the s-th action that runs (chunk ``s // E`` with
 ``E = executed_per_chunk``), at ``s / fps`` seconds after the rollout's start frame. For a
 single-chunk rollout the steps are the whole predicted horizon.
+
+Joint metrics come from :func:`inspector.sweep.sweep_metrics`, for one rollout or for a batch
+that shares a GT episode (:func:`build_timelines`); video metrics stream both clips frame pair
+by frame pair (:mod:`inspector.video_metrics`) and are computed on first request.
 """
 
 from __future__ import annotations
@@ -11,37 +15,19 @@ import os
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 import numpy.typing as npt
 
 from . import metrics
 from .ground_truth import GroundTruth, resolve_ground_truth
-from .kinematics import kinematics
 from .session import Rollout
-from .units import JOINT_NAMES, Units, limits_in_units
+from .sweep import SweepMetrics, sweep_metrics
+from .units import DEFAULT_LIMIT_MARGIN_DEG, JOINT_NAMES, Units
+from .video_metrics import VideoMetrics, compare_clips
 
 Array = npt.NDArray[np.float64]
-
-
-@dataclass
-class VideoMetrics:
-    """Imagined vs GT frames of one view at the same times (GT resized to the imagined size).
-
-    Attributes:
-        psnr_db: (F,) per imagined frame; NaN where no GT frame exists (past the episode).
-        ssim: (F,) likewise, or None when not asked for (it costs ~10x the PSNR).
-    """
-
-    view: str
-    psnr_db: Array
-    ssim: Array | None = None
-
-    @property
-    def mean_psnr_db(self) -> float | None:
-        v = self.psnr_db[np.isfinite(self.psnr_db)]
-        return float(v.mean()) if v.size else None
 
 
 @dataclass
@@ -64,7 +50,10 @@ class RolloutTimeline:
     chunks: Array  # (N, H, 6) every predicted chunk (the trails)
     chunk_start_step: npt.NDArray[np.int64]  # (N,) first step of each chunk
     limits: Array  # (6, 2) joint limits in data units
-    limit_violation: npt.NDArray[np.bool_]  # (T, 6)
+    limit_margin: Array  # (6,) tolerance past a limit before it counts, data units
+    limit_margin_deg: float
+    limit_excess: Array  # (T, 6) distance past the limit, 0 inside
+    limit_violation: npt.NDArray[np.bool_]  # (T, 6) past a limit by more than the margin
     chunk_limit_violation: npt.NDArray[np.bool_]  # (N, H, 6)
     ee_pred: Array  # (T, 3) tool point [m]
     # With GT joints (None otherwise):
@@ -129,16 +118,41 @@ class RolloutTimeline:
         step = chunk * self.steps_per_chunk + (within * r.executed_per_chunk) // r.frames_per_chunk
         return np.minimum(step, self.n_steps - 1)
 
+    def gt_index_of_frame(self, view: str) -> Callable[[int], int]:
+        """``f -> index`` in ``gt.clips[view]`` of the GT frame paired with imagined frame ``f``
+        (-1: none, past the episode): the same frame for carried GT, else the frame's step."""
+        n_gt = self.gt.frames_in_clip(view)
+        r = self.rollout
+
+        def index_of(f: int) -> int:
+            if self.gt.carried:
+                i = f
+            else:
+                chunk, within = divmod(f, r.frames_per_chunk)
+                i = min(chunk * self.steps_per_chunk + (within * r.executed_per_chunk) // r.frames_per_chunk,
+                        self.n_steps - 1)
+            return i if i < n_gt else -1
+        return index_of
+
     def per_chunk(self, series: npt.ArrayLike | None) -> Array | None:
         """(N,) mean of a (T,) series over each chunk's steps."""
         return None if series is None else metrics.chunk_mean(series, self.steps_per_chunk)
 
-    def worst_chunk(self) -> int:
-        """The chunk with the largest drift (time-aligned, else limit violations, else 0)."""
-        series = self.per_chunk(self.time_aligned_drift)
-        if series is None or not np.isfinite(series).any():
-            series = self.per_chunk(self.limit_violation.sum(axis=1).astype(float))
-        return int(np.nanargmax(series)) if series is not None and np.isfinite(series).any() else 0
+    def limit_summary(self) -> metrics.LimitSummary:
+        """Joint-limit violations over the executed steps (count, steps, by joint, max excess)."""
+        return metrics.LimitSummary.of(self.limit_violation, self.limit_excess)
+
+    def worst_chunk(self) -> tuple[int, str]:
+        """(chunk, why): the chunk with the largest time-aligned drift when GT joints exist,
+        otherwise the largest joint-limit excess; chunk 0 when neither says anything."""
+        drift = self.per_chunk(self.time_aligned_drift)
+        if drift is not None and np.isfinite(drift).any():
+            return int(np.nanargmax(drift)), "largest time-aligned drift"
+        excess = np.where(self.limit_violation, self.limit_excess, 0.0).max(axis=1)
+        by_chunk = np.array([excess[self.step_chunk == c].max(initial=0.0) for c in range(self.n_chunks)])
+        if by_chunk.max(initial=0.0) > 0:
+            return int(np.argmax(by_chunk)), "largest joint-limit excess"
+        return 0, "no GT joints and no limit violation"
 
     # -- video -------------------------------------------------------------------------------
     def video_views(self) -> list[str]:
@@ -146,34 +160,29 @@ class RolloutTimeline:
         return [v for v in self.rollout.views if v in self.gt.views]
 
     def video_metrics(self, view: str, with_ssim: bool = False) -> VideoMetrics:
-        """PSNR (and SSIM if asked) of ``view``, computed on first request and cached."""
+        """PSNR (and SSIM if asked) of ``view``, streamed on first request and kept."""
         with self._video_lock:
             vm = self._video.get(view)
-            if vm is None or (with_ssim and vm.ssim is None):
-                vm = self._compute_video_metrics(view, with_ssim)
-                self._video[view] = vm
-            return vm
+        if vm is None or (with_ssim and vm.ssim is None):
+            clip = self.rollout.video(view)
+            gt = self.gt.clips.get(view)
+            vm = compare_clips(view, [clip], gt, self.gt_index_of_frame(view), with_ssim)[0]
+            self.set_video_metrics(vm)
+        return vm
 
-    def gt_frames_resized(self, view: str) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.uint8]]:
-        """(frames with GT, their GT frames resized to the imagined size) for ``view``."""
-        imagined = self.rollout.video(view).frames
-        h, w = imagined.shape[1:3]
-        if view in self.rollout.gt_views:
-            # carried GT: frame i pairs with imagined frame i, already decoded at the imagined size
-            gt = self.rollout.video(view, gt=True).frames[: len(imagined)]
-            return np.arange(len(gt)), metrics.resize_frames(gt, h, w)
-        steps = self.frame_step(len(imagined))
-        pairs = [(f, self.gt.frame(view, f, int(steps[f]))) for f in range(len(imagined))]
-        have = np.array([f for f, g in pairs if g is not None], dtype=np.int64)
-        if have.size == 0:
-            return have, np.zeros((0, *imagined.shape[1:]), np.uint8)
-        return have, metrics.resize_frames(np.stack([pairs[f][1] for f in have]), h, w)
+    def set_video_metrics(self, vm: VideoMetrics) -> None:
+        """Keep a view's video metrics computed elsewhere (a cache, the app's frame loader)."""
+        with self._video_lock:
+            self._video[vm.view] = vm
+
+    def known_video_metrics(self) -> dict[str, VideoMetrics]:
+        """The video metrics computed so far, without computing any."""
+        with self._video_lock:
+            return dict(self._video)
 
     def all_video_metrics(self, views: list[str] | None = None,
                           progress: Callable[[float, str], None] | None = None) -> dict[str, VideoMetrics]:
-        """PSNR of every paired view, decoding clips in worker threads while comparing the ready ones.
-
-        PyAV decodes outside the GIL, so on two cores one clip decodes while another is compared.
+        """PSNR of every paired view, one view per worker thread (PyAV decodes outside the GIL).
 
         Args:
             views: views to compute (default: every view with imagined and GT frames).
@@ -183,85 +192,76 @@ class RolloutTimeline:
 
         paired = [v for v in (self.video_views() if views is None else views) if v in self.video_views()]
         out: dict[str, VideoMetrics] = {}
-        with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
-            decoding = {v: [pool.submit(len, self.rollout.video(v)), pool.submit(len, self.gt.clips[v])]
-                        for v in paired}
+        with ThreadPoolExecutor(max_workers=max(1, min(len(paired), os.cpu_count() or 1))) as pool:
+            futures = {v: pool.submit(self.video_metrics, v) for v in paired}
             for i, view in enumerate(paired):
                 if progress is not None:
-                    progress(i / max(1, len(paired)), f"decoding {view} video")
-                for future in decoding[view]:
-                    future.result()
-                if progress is not None:
-                    progress((i + 0.5) / max(1, len(paired)), f"PSNR {view}")
-                out[view] = self.video_metrics(view)
+                    progress(i / max(1, len(paired)), f"PSNR {view}")
+                out[view] = futures[view].result()
         return out
 
-    def _compute_video_metrics(self, view: str, with_ssim: bool) -> VideoMetrics:
-        imagined = self.rollout.video(view).frames
-        psnr = np.full(len(imagined), np.nan)
-        ssim = np.full(len(imagined), np.nan) if with_ssim else None
-        if view in self.gt.views:
-            have, gt_frames = self.gt_frames_resized(view)
-            if have.size:
-                psnr[have] = metrics.psnr(imagined[have], gt_frames)
-                if ssim is not None:
-                    ssim[have] = metrics.ssim(imagined[have], gt_frames)
-        return VideoMetrics(view, psnr, ssim)
 
-
-def build_timeline(rollout: Rollout, dataset_root: Path | None = None,
-                   gt: GroundTruth | None = None) -> RolloutTimeline:
+def build_timeline(rollout: Rollout, dataset_root: Path | None = None, gt: GroundTruth | None = None,
+                   limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG) -> RolloutTimeline:
     """Compute every joint-space metric of ``rollout`` (video metrics stay lazy)."""
     gt = gt if gt is not None else resolve_ground_truth(rollout, dataset_root)
-    units = rollout.units
-    pred = rollout.executed_actions()
+    return build_timelines([rollout], gt, limit_margin_deg)[0]
+
+
+def batch_key(rollout: Rollout, gt: GroundTruth) -> tuple | None:
+    """Rollouts with the same key can share one :func:`build_timelines` batch (None: alone)."""
+    if gt.dataset_key is None or rollout.gt_actions is not None:
+        return None
+    return (gt.dataset_key, rollout.units, rollout.kind, rollout.actions.shape, rollout.steps_per_chunk)
+
+
+def build_timelines(rollouts: Sequence[Rollout], gt: GroundTruth,
+                    limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG) -> list[RolloutTimeline]:
+    """Timelines of rollouts that share ``gt`` (same :func:`batch_key`), their joint metrics in
+    one batch. Each rollout's numbers are the same as when it is computed alone."""
+    first = rollouts[0]
+    chunks = np.stack([r.actions for r in rollouts])
+    offset = gt.offset
+    m = sweep_metrics(chunks, gt.actions, first.units, first.steps_per_chunk, offset, limit_margin_deg)
+    return [_timeline(r, gt, m, b, limit_margin_deg) for b, r in enumerate(rollouts)]
+
+
+def _timeline(rollout: Rollout, gt: GroundTruth, m: SweepMetrics, b: int, margin_deg: float) -> RolloutTimeline:
+    """Rollout ``b`` of a sweep as a timeline."""
+    pred = m.pred[b]
     n_steps = pred.shape[0]
     steps_per_chunk = rollout.steps_per_chunk
-    limits = limits_in_units(units)
-    fk = kinematics()
     tl = RolloutTimeline(
-        rollout=rollout, gt=gt, units=units, fps=rollout.fps,
+        rollout=rollout, gt=gt, units=rollout.units, fps=rollout.fps,
         executed_per_chunk=rollout.executed_per_chunk, horizon=rollout.horizon,
         n_chunks=rollout.n_chunks,
         t_s=np.arange(n_steps) / rollout.fps,
         step_chunk=np.arange(n_steps) // steps_per_chunk,
         pred=pred, chunks=rollout.actions,
         chunk_start_step=np.arange(rollout.n_chunks) * steps_per_chunk,
-        limits=limits,
-        limit_violation=metrics.limit_violations(pred, limits),
-        chunk_limit_violation=metrics.limit_violations(rollout.actions, limits),
-        ee_pred=fk.gripper_positions(pred, units),
+        limits=m.limits, limit_margin=m.limit_margin, limit_margin_deg=margin_deg,
+        limit_excess=m.limit_excess[b], limit_violation=m.limit_violation[b],
+        chunk_limit_violation=m.chunk_limit_violation[b],
+        ee_pred=m.ee_pred[b],
     )
     steps_in_episode = gt.steps_in_episode
     if steps_in_episode is not None and steps_in_episode < n_steps:
         tl.episode_end_step = max(0, steps_in_episode)
-    if gt.actions is None:
+    if m.gt_aligned is None:
         return tl
-
-    ta, gt_aligned, post = metrics.time_aligned(pred, gt.actions, gt.offset)
-    bm, bm_index = metrics.best_match(pred, gt.actions)
-    speed, path = metrics.drift_split(ta, bm)
-    dtw_drift, dtw_cost = metrics.dtw(pred, gt.actions[gt.offset:])
-    ee_gt = fk.gripper_positions(gt_aligned, units)
-    tl.gt_aligned, tl.post_episode = gt_aligned, post
-    tl.time_aligned_drift, tl.best_match_drift, tl.best_match_index = ta, bm, bm_index
-    tl.tempo = metrics.tempo(bm_index, ~post) if (~post).sum() >= 2 else None
-    tl.speed_mismatch, tl.path_error = speed, path
-    tl.dtw_drift, tl.dtw_cost = dtw_drift, dtw_cost
-    tl.joint_error = pred - gt_aligned
-    tl.ee_gt = ee_gt
-    tl.ee_error_mm = np.linalg.norm(tl.ee_pred - ee_gt, axis=1) * 1000.0
-
-    # Chunk errors: each chunk's full horizon against GT over the same steps, where GT covers it.
-    starts = tl.chunk_start_step + gt.offset
-    idx = starts[:, None] + np.arange(rollout.horizon)[None]
-    inside = idx[:, -1] < gt.actions.shape[0]
-    tl.chunk_rmse = np.full(rollout.n_chunks, np.nan)
-    if inside.any():
-        gt_chunks = gt.actions[idx[inside]]
-        tl.chunk_rmse[inside] = metrics.per_chunk_rmse(rollout.actions[inside], gt_chunks)
-        tl.chunk_errors = metrics.chunk_errors(rollout.actions[inside], gt_chunks)
+    tl.gt_aligned, tl.post_episode = m.gt_aligned, m.post_episode
+    tl.time_aligned_drift, tl.best_match_drift = m.time_aligned_drift[b], m.best_match_drift[b]
+    tl.best_match_index = m.best_match_index[b]
+    tempo = float(m.tempo[b])
+    tl.tempo = tempo if np.isfinite(tempo) else None
+    tl.speed_mismatch, tl.path_error = m.speed_mismatch[b], m.path_error[b]
+    tl.dtw_drift, tl.dtw_cost = m.dtw_drift[b], float(m.dtw_cost[b])
+    tl.joint_error = pred - m.gt_aligned
+    tl.ee_gt, tl.ee_error_mm = m.ee_gt, m.ee_error_mm[b]
+    tl.chunk_rmse = m.chunk_rmse[b]
+    if m.chunks_inside is not None and m.chunks_inside.any():
+        tl.chunk_errors = metrics.ChunkErrors(float(m.rmse[b]), m.per_step_mse[b], m.per_joint_rmse[b])
     return tl
 
 
-__all__ = ["RolloutTimeline", "VideoMetrics", "build_timeline", "JOINT_NAMES"]
+__all__ = ["RolloutTimeline", "VideoMetrics", "build_timeline", "build_timelines", "batch_key", "JOINT_NAMES"]

@@ -132,6 +132,17 @@ def limits_in_units(units: Units) -> npt.NDArray[np.float64]:
     return np.stack([from_radians(lo, units), from_radians(hi, units)], axis=1)
 
 
+# How far past a URDF limit a value may rest before it counts as a violation [deg]: calibrated
+# SO-101 data rests slightly past the URDF's elbow limit (elbow_flex 98.5 deg against 96.8).
+DEFAULT_LIMIT_MARGIN_DEG = 2.0
+
+
+def limit_margin_in_units(units: Units, margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG) -> npt.NDArray[np.float64]:
+    """(6,) an angle margin [deg] expressed per joint in the dataset's units."""
+    per_rad = from_radians(np.ones(6), units) - from_radians(np.zeros(6), units)  # units per radian
+    return np.abs(per_rad) * np.deg2rad(margin_deg)
+
+
 def guess_arm_units(values: npt.ArrayLike) -> tuple[Units, str]:
     """Guess the arm mode when nobody stated it; the result is marked ``guessed``.
 

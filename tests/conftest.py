@@ -2,12 +2,20 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
 
 # The repo sits at <work>/main and the shared fixtures at <work>/shared/fixtures.
 FIXTURES_DIR = Path(__file__).resolve().parents[2] / "shared" / "fixtures"
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _private_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """The metrics and mesh caches of this test run, apart from the user's (and inherited by
+    every CLI the tests start)."""
+    os.environ["INSPECTOR_CACHE_DIR"] = str(tmp_path_factory.mktemp("inspector-cache"))
 
 
 @pytest.fixture(scope="session")

@@ -103,7 +103,7 @@ def test_worst_chunk_and_limits(app):
     with client:
         assert tab.open(key(app, "ep000_train"))
         tl = tab.loaded.timeline
-        assert tab.jump_to_worst_chunk() == tl.worst_chunk() * tl.steps_per_chunk
+        assert tab.jump_to_worst_chunk() == tl.worst_chunk()[0] * tl.steps_per_chunk
         bad = int(np.flatnonzero(tl.limit_violation.any(axis=1))[0])
         tab.set_step(bad)
         texts = tab._limit_text(bad)

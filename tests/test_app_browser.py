@@ -199,7 +199,7 @@ def test_screenshot(browser, app, tmp_path):
         tag = _pick_rollout(shot_app)
         open_in_page(page, tab, shot_app, tag)
         tl = tab.loaded.timeline
-        tab.set_chunk(min(tl.worst_chunk(), tl.n_chunks - 1) if tl.kind == "autoregressive" else 0, 4)
+        tab.set_chunk(min(tl.worst_chunk()[0], tl.n_chunks - 1) if tl.kind == "autoregressive" else 0, 4)
         wait_until(lambda: tab.loaded.frames.done.is_set(), timeout=60, what="PSNR")
         page.wait_for_timeout(2500)
         out = tmp_path / "screenshot.png"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -50,6 +51,32 @@ def test_fk_matches_yourdfpy_on_random_in_limit_configurations():
         for link in fk.link_names:
             worst = max(worst, np.abs(urdf.get_transform(link, "base_link")[:3, 3] - ours[link][i, :3, 3]).max())
     assert worst <= 1e-6
+
+
+def test_fk_matches_pytorch_kinematics_for_every_link():
+    """A second independent parser of the same URDF (its chain is parsed in float32: ~5e-7 m)."""
+    torch = pytest.importorskip("torch")
+    pk = pytest.importorskip("pytorch_kinematics")
+    chain = pk.build_chain_from_urdf(resolved_urdf_text()[0].encode()).to(dtype=torch.float64)
+    names = chain.get_joint_parameter_names()
+    q = np.random.default_rng(3).uniform(-1.5, 1.5, size=(300, 6))
+    theirs = chain.forward_kinematics(torch.from_numpy(q[:, [JOINT_NAMES.index(n) for n in names]]))
+    ours = kinematics().link_poses(q)
+    for link in kinematics().link_names:
+        np.testing.assert_allclose(ours[link], theirs[link].get_matrix().numpy(), atol=2e-6)
+
+
+def test_the_command_line_never_loads_torch(tmp_path):
+    """FK, metrics and video run on numpy alone: no command pays torch's ~2 s and ~250 MB."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from inspector.cli import main; "
+            "main(['report', sys.argv[1], '--json', '--jobs', '1', '--no-cache']); "
+            "assert 'torch' not in sys.modules, 'torch was imported'")
+    demo = Path(__file__).resolve().parents[1] / "sessions" / "demo" / "rollouts" / "single_f000"
+    out = subprocess.run([sys.executable, "-c", code, str(demo)], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
 
 
 def test_batched_equals_per_sample():

@@ -117,12 +117,14 @@ def test_video_frames_line_up(dataset_root: Path) -> None:
             clip = ep.video(cam)
             assert len(clip) == ep.length, (cam, info.index)
             h, w, c = ds.features[f"observation.images.{cam}"]["shape"]
-            assert clip.frames.shape == (ep.length, h, w, c)
-            assert np.abs(clip.times - ep.timestamps).max() < 0.5 / ep.fps
-            assert ep.video(cam) is clip  # decoded once
+            frames = clip.decode()
+            assert frames.shape == (ep.length, h, w, c)
+            assert np.abs(clip.timestamps() - ep.timestamps).max() < 0.5 / ep.fps
             k = ep.length // 2
-            assert np.array_equal(ep.frame_at(cam, float(ep.timestamps[k])), clip.frames[k])
-            assert np.array_equal(ep.frame(cam, k), clip.frames[k])
+            # a frame decoded alone (seek from the keyframe before it) is the streamed one
+            assert np.array_equal(ep.frame_at(cam, float(ep.timestamps[k])), frames[k])
+            assert np.array_equal(ep.frame(cam, k), frames[k])
+            assert [i for i, _ in clip.iter_frames(start=k)] == list(range(k, ep.length))
 
 
 def test_v30_episodes_are_distinct_windows(fixtures_dir: Path) -> None:
@@ -135,7 +137,7 @@ def test_v30_episodes_are_distinct_windows(fixtures_dir: Path) -> None:
     whole, _ = decode(ds.episodes[0].videos["front"].path)
     info = ds.episode_info(1)
     clip = ds.episode(1).video("front")
-    assert np.array_equal(clip.frames, whole[info.from_index:info.to_index])
+    assert np.array_equal(clip.decode(), whole[info.from_index:info.to_index])
 
 
 # --------------------------------------------------------------------------------------------------
@@ -180,9 +182,10 @@ def test_writer_round_trip(tmp_path: Path) -> None:
         np.testing.assert_allclose(ep.timestamps, np.arange(ep.length) / 30, atol=1e-6)
         for cam, frames in src.frames.items():
             clip = ep.video(cam)
-            assert clip.frames.shape == frames.shape
-            assert np.abs(clip.times - ep.timestamps).max() < 0.5 / 30
-            diff = np.abs(clip.frames.astype(np.int16) - frames.astype(np.int16)).mean()
+            decoded = clip.decode()
+            assert decoded.shape == frames.shape
+            assert np.abs(clip.timestamps() - ep.timestamps).max() < 0.5 / 30
+            diff = np.abs(decoded.astype(np.int16) - frames.astype(np.int16)).mean()
             assert diff < 4.0, (i, cam, diff)
     stats = json.loads((root / "meta" / "stats.json").read_text())
     all_state = np.concatenate([e.state for e in episodes]).astype(np.float32).astype(np.float64)
@@ -400,13 +403,17 @@ def test_find_dataset_not_found(tmp_path: Path, monkeypatch: pytest.MonkeyPatch)
         find_dataset(tmp_path / "a" / "b" / "c")
 
 
-def test_load_videos_decodes_every_camera(fixtures_dir: Path) -> None:
+def test_episode_clip_from_a_start_frame(fixtures_dir: Path) -> None:
+    """A rollout's GT clip starts at its start frame: frame i of the clip is episode frame start + i."""
     root = fixtures_dir / "lerobot" / "so101_v30"
     if not root.is_dir():
         pytest.skip(f"{root} not present")
-    ep = LeRobotDataset(root).episode(2).load_videos()
-    assert sorted(ep._clips) == ["front", "wrist"]
-    assert all(len(ep.video(c)) == 240 for c in ep.cameras)
+    ep = LeRobotDataset(root).episode(2)
+    whole = ep.video("front").decode()
+    tail = ep.clip_from("front", 100).decode(size=(160, 120))
+    assert tail.shape == (240 - 100, 120, 160, 3)
+    assert np.array_equal(tail[0], ep.frame("front", 100, size=(160, 120)))
+    assert np.abs(tail[5].astype(int).mean() - whole[105].astype(int).mean()) < 3  # same picture, smaller
 
 
 # --------------------------------------------------------------------------------------------------

@@ -78,10 +78,11 @@ def truncate(path: Path, keep: float = 0.5) -> None:
     path.write_bytes(data[: int(len(data) * keep)])
 
 
-def corrupt_middle(path: Path, n: int = 2000) -> None:
-    """Zero ``n`` bytes in the middle: the container still opens, the stream does not decode."""
+def corrupt_middle(path: Path, n: int = 2000, at: float = 0.5) -> None:
+    """Zero ``n`` bytes at fraction ``at`` of the file: the container still opens, the stream does
+    not decode there."""
     data = bytearray(path.read_bytes())
-    mid = len(data) // 2
+    mid = int(len(data) * at)
     data[mid:mid + n] = bytes(len(data[mid:mid + n]))
     path.write_bytes(bytes(data))
 
@@ -614,7 +615,8 @@ CASES: list[Case] = [
          check=_ok_report_rows(["f000", "f169"], "/f084", "f084/gt/video/gripper.mp4", "cannot")),
     Case("report-absurd-1e30-still-reports", _session_cmd("report", "zs1", lambda s: _scale_actions(s, 1e30), "--json"),
          rc=0, check=_check_absurd_1e30),
-    Case("report-same-session-twice", _same_session_twice, rc=0, check=_rows(["f084", "f084"])),
+    # a session named twice is one session: its rollouts are reported once
+    Case("report-same-session-twice", _same_session_twice, rc=0, check=_rows(["f084"])),
     # ---------------------------------------------------------------- report: GT from a dataset
     Case("report-dataset-episode-beyond",
          _ds_cmd("report", lambda ws, d, s: edit_json(s / "rollouts/r1/rollout.json", episode_index=7), "--json"), rc=0,
@@ -633,8 +635,12 @@ CASES: list[Case] = [
          _ds_with_broken_dataset(lambda ds: set_parquet_column(ds / V30_DATA, "action",
                                                                lambda rows: [r[:5] for r in rows], variable_list=True)),
          file=V30_DATA, field="action: expected 6 values per row, found 5"),
-    Case("report-dataset-video-corrupt", _ds_with_broken_dataset(lambda ds: corrupt_middle(ds / V30_FRONT, 4000)), rc=0,
-         check=_ok_report_rows(["r0"], "/r1", V30_FRONT, "cannot decode video")),
+    # the first frames of episode 1 (what r1's 18 imagined frames pair with; 22% into the file) are
+    # corrupt; frames no rollout uses are never decoded, so corruption there breaks nothing
+    Case("report-dataset-video-corrupt", _ds_with_broken_dataset(lambda ds: corrupt_middle(ds / V30_FRONT, 4000, 0.22)),
+         rc=0, check=_ok_report_rows(["r0"], "/r1", V30_FRONT, "cannot decode video")),
+    Case("report-dataset-video-corrupt-where-unused", _ds_with_broken_dataset(
+        lambda ds: corrupt_middle(ds / V30_FRONT, 4000, 0.5)), rc=0, check=_rows(["r0", "r1"])),
     Case("report-rollout-longer-than-episode", _long_rollouts, rc=0, check=_check_long),
     # ---------------------------------------------------------------- export
     Case("export-session-invalid-json", _export_cmd("zs1", lambda s: (s / "session.json").write_text("[")),
@@ -880,11 +886,12 @@ def _write_session(root: Path, session_json: bytes, rollout_json: bytes, actions
 
 def _report_row_or_clean_error(rollout: Any) -> None:
     """The rollout's timeline and report row build, or fail with a one-line InspectorError."""
-    from inspector.report import rollout_summary
+    from inspector.report_row import rollout_summary
     from inspector.timeline import build_timeline
 
     try:
-        row = rollout_summary(build_timeline(rollout))
+        tl = build_timeline(rollout)
+        row = rollout_summary(tl, tl.all_video_metrics())
     except InspectorError as exc:
         assert "\n" not in str(exc)
         event("timeline refused")

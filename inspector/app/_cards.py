@@ -70,20 +70,19 @@ def headline_metrics(tl: RolloutTimeline, psnr: dict[str, np.ndarray | None] | N
             rows.append(("end-effector error", f"mean {_fmt(np.nanmean(tl.ee_error_mm), ' mm', 0)}"))
     else:
         rows.append(("joint drift", "no GT joints (serve with --dataset to compare joints)"))
-    viol = tl.limit_violation
-    if viol.any():
+    limits = tl.limit_summary()
+    name = f"steps past a joint limit (+{tl.limit_margin_deg:g}° margin)"
+    if limits.steps:
         from ..units import JOINT_NAMES
 
-        joints = ", ".join(j for j, v in zip(JOINT_NAMES, viol.any(axis=0)) if v)
-        rows.append(("joint-limit violations", f"{int(viol.any(axis=1).sum())} of {tl.n_steps} steps ({joints})"))
+        joints = ", ".join(j for j, n in zip(JOINT_NAMES, limits.by_joint) if n)
+        rows.append((name, f"{limits.steps} of {tl.n_steps} ({joints})"))
     else:
-        rows.append(("joint-limit violations", "none"))
+        rows.append((name, "none"))
     if psnr is not None and tl.video_views():
         means = {v: float(np.nanmean(p)) for v, p in psnr.items() if p is not None and np.isfinite(p).any()}
-        if means:
-            overall = float(np.mean(list(means.values())))
-            per = ", ".join(f"{v} {m:.1f}" for v, m in means.items())
-            rows.append(("video PSNR", f"{overall:.1f} dB ({per})"))
+        if means:  # per view: the front camera's figure is not averaged away by the wrist's
+            rows.append(("video PSNR", ", ".join(f"{v} {m:.1f} dB" for v, m in means.items())))
         elif loading_video:
             rows.append(("video PSNR", "computing…"))
     ref = tl.rollout.extra.get("reference_metrics") if isinstance(tl.rollout.extra, dict) else None
@@ -115,7 +114,8 @@ def rollout_card(tl: RolloutTimeline, metrics: Sequence[tuple[str, str]], gt_not
     rows += [(esc(k), esc(v)) for k, v in metrics]
     body = "".join(f"<tr><td style='{TD};{MUTED};white-space:nowrap'>{k}</td><td style='{TD}'>{v}</td></tr>"
                    for k, v in rows)
-    return f"<div style='{CARD}'><table style='{TABLE}'>{body}</table></div>"
+    return (f"<div class='inspector-card' data-rollout='{esc(r.tag)}' style='{CARD}'>"
+            f"<table style='{TABLE}'>{body}</table></div>")
 
 
 def error_card(title: str, error: BaseException) -> str:

@@ -1,9 +1,15 @@
-"""Imagined and GT video frames of one rollout, decoded in the background and served as JPEG.
+"""Video frames for the browser: decoded in the background, kept only as the JPEGs it is sent.
 
-Decoding a 540-frame view (imagined + GT) takes about a second, so a rollout opens at once and its
-views arrive as they finish ("loading" until then). Each frame is JPEG-encoded on first display and
-kept, so scrubbing back and forth never encodes twice. PSNR per view comes from the shared
-timeline (``RolloutTimeline.video_metrics``) once both clips of the view are decoded.
+One :class:`FrameCache` serves the whole server: JPEG data URIs at display size under a byte
+budget (``inspector serve --cache-mb``), least recently used evicted first, across rollouts and
+tabs. No decoded frame outlives the moment it is encoded, so memory follows the budget, not the
+number of rollouts ever opened.
+
+A rollout's :class:`FrameStore` fills the cache one view at a time: a worker streams the
+imagined clip and its GT clip together (:func:`inspector.video_metrics.compare_clips`),
+JPEG-encodes every frame as it passes and computes the view's PSNR on the way, so one decode
+serves both. Reopening a recently seen rollout finds its frames in the cache; frames evicted
+since are decoded again in the background. The scrub path only looks frames up.
 """
 
 from __future__ import annotations
@@ -11,18 +17,77 @@ from __future__ import annotations
 import base64
 import io
 import threading
+from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import Executor
 from dataclasses import dataclass
+from typing import Any, Hashable
 
 import numpy as np
 import numpy.typing as npt
 
+from ..cache import DEFAULT_FRAME_CACHE_MB
 from ..timeline import RolloutTimeline
+from ..video import fit_size
 
 LOADING = "loading"
 READY = "ready"
 JPEG_QUALITY = 80
+# The widest frame the video panel shows [px]; larger clips are scaled down before encoding.
+DISPLAY_MAX_WIDTH = 640
+
+
+class FrameCache:
+    """JPEG data URIs by key, least recently used evicted beyond ``budget_bytes``. Thread-safe.
+
+    Attributes:
+        hits, misses, evictions: counters (for tests and the benchmark).
+    """
+
+    def __init__(self, budget_bytes: int = DEFAULT_FRAME_CACHE_MB * 2**20) -> None:
+        self.budget_bytes = int(budget_bytes)
+        self._items: OrderedDict[Hashable, str] = OrderedDict()
+        self._bytes = 0
+        self._lock = threading.Lock()
+        self.hits = self.misses = self.evictions = 0
+
+    @property
+    def bytes(self) -> int:
+        """What the cached URIs take [bytes]."""
+        return self._bytes
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def get(self, key: Hashable) -> str | None:
+        with self._lock:
+            uri = self._items.get(key)
+            if uri is None:
+                self.misses += 1
+                return None
+            self._items.move_to_end(key)
+            self.hits += 1
+            return uri
+
+    def __contains__(self, key: Hashable) -> bool:
+        with self._lock:
+            return key in self._items
+
+    def put(self, key: Hashable, uri: str) -> None:
+        """Keep ``uri``; an entry larger than the whole budget is not kept at all."""
+        size = len(uri)
+        with self._lock:
+            old = self._items.pop(key, None)
+            if old is not None:
+                self._bytes -= len(old)
+            if size > self.budget_bytes:
+                return
+            self._items[key] = uri
+            self._bytes += size
+            while self._bytes > self.budget_bytes:
+                _, evicted = self._items.popitem(last=False)
+                self._bytes -= len(evicted)
+                self.evictions += 1
 
 
 @dataclass
@@ -55,73 +120,147 @@ class FrameStore:
     Args:
         timeline: the rollout's shared timeline.
         executor: where decoding runs (a small pool shared by the app).
+        cache: the server's frame cache.
+        on_video_metrics: called with each view's :class:`~inspector.video_metrics.VideoMetrics`
+            once computed (the app stores them in the metrics cache).
     """
 
-    def __init__(self, timeline: RolloutTimeline, executor: Executor) -> None:
+    def __init__(self, timeline: RolloutTimeline, executor: Executor, cache: FrameCache,
+                 on_video_metrics: Callable[[Any], None] | None = None) -> None:
         self.timeline = timeline
         self.views: list[str] = list(timeline.rollout.views)
         self.status: dict[str, str] = {v: LOADING for v in self.views}  # imagined clips
-        self.gt_status: dict[str, str] = {v: LOADING for v in self.views}  # GT clips
-        self.psnr: dict[str, npt.NDArray[np.float64] | None] = {v: None for v in self.views}
+        self.gt_status: dict[str, str] = {v: (LOADING if v in timeline.gt.clips else "no GT video for this view")
+                                          for v in self.views}
+        known = timeline.known_video_metrics()
+        self.psnr: dict[str, npt.NDArray[np.float64] | None] = {
+            v: known[v].psnr_db if v in known else None for v in self.views}
         self._executor = executor
-        self._jpeg: dict[tuple[str, str, int], str] = {}
+        self._cache = cache
+        self._on_video_metrics = on_video_metrics
         self._lock = threading.Lock()
         self._listeners: list[Callable[[], None]] = []
-        self._started = False
-        self.decoded = threading.Event()  # every clip decoded (or failed): ready to scrub
-        self.done = threading.Event()  # ... and every view's PSNR computed
+        self._filling: set[str] = set()
+        self._finished: set[str] = set()  # views whose clips have passed through once
+        self._sizes: dict[str, tuple[int, int]] = {}
+        self.decoded = threading.Event()  # every view's frames are in the cache: ready to scrub
+        self.done = threading.Event()  # ... and every view's PSNR is known
 
     # -- background work ----------------------------------------------------------------------
     def start(self) -> None:
-        """Queue the decodes (idempotent). Listeners hear about every clip and PSNR that finishes.
-
-        Imagined and GT clips are separate jobs, so two workers stay busy to the end (three views
-        as three two-clip jobs would leave one worker idle for the last view).
-        """
-        with self._lock:
-            if self._started:
-                return
-            self._started = True
-            self._pending = len(self.views)
-            self._halves = {v: 2 for v in self.views}  # clips still decoding per view
-            self._clips_left = 2 * len(self.views)
+        """Fill the cache with every view's frames, except views already there with their PSNR
+        (a rollout reopened while its frames are still cached opens at once)."""
+        for view in self.views:
+            if self._already_cached(view):
+                self.status[view] = READY
+                if view in self.timeline.gt.clips:
+                    self.gt_status[view] = READY
+                self._view_finished(view)
+            else:
+                self._fill(view)
         if not self.views:
             self.decoded.set()
             self.done.set()
-            return
-        for view in self.views:
-            self._executor.submit(self._load_clip, view, False)
-            self._executor.submit(self._load_clip, view, True)
 
-    def _load_clip(self, view: str, gt: bool) -> None:
+    def _already_cached(self, view: str) -> bool:
         tl = self.timeline
-        if not gt:
-            self.status[view] = _attempt(lambda: tl.rollout.video(view).load())
-        elif view in tl.gt.views:
-            self.gt_status[view] = _attempt(lambda: tl.gt.clips[view].frames)  # decode now, not on a scrub
-        else:
-            self.gt_status[view] = "no GT video for this view"
+        has_gt = view in tl.gt.clips
+        if has_gt and self.psnr.get(view) is None:
+            return False
+        try:
+            n = len(tl.rollout.video(view))
+            size = self.display_size(view)
+        except Exception:
+            return False
+        imagined_key, gt_key = self._keys(view)
+        wanted = [(*imagined_key, 0, size), (*imagined_key, n - 1, size)]
+        if has_gt:
+            wanted.append((*gt_key, 0, size))
+        return all(k in self._cache for k in wanted)
+
+    def _fill(self, view: str) -> None:
         with self._lock:
-            self._clips_left -= 1
-            if self._clips_left == 0:
-                self.decoded.set()
-        self._notify()
+            if view in self._filling:
+                return
+            self._filling.add(view)
+        self._executor.submit(self._fill_view, view)
+
+    def _fill_view(self, view: str) -> None:
+        """Stream the view's imagined and GT clips into the cache, computing PSNR on the way."""
+        from ..errors import InspectorError
+        from ..video_metrics import compare_clips
+
+        tl = self.timeline
+        gt_clip = tl.gt.clips.get(view)
+        imagined_key, gt_key = self._keys(view)
+
+        def imagined(_: int, f: int, rgb: npt.NDArray[np.uint8]) -> None:
+            self._store(view, (*imagined_key, f), rgb)
+
+        def gt_frame(i: int, rgb: npt.NDArray[np.uint8]) -> None:
+            self._store(view, (*gt_key, i), rgb)
+
+        def run(with_gt: bool):
+            return compare_clips(view, [tl.rollout.video(view)], gt_clip if with_gt else None,
+                                 tl.gt_index_of_frame(view) if with_gt else (lambda f: -1),
+                                 on_imagined=imagined, on_gt=gt_frame if with_gt else None)[0]
+
+        try:
+            vm = run(with_gt=gt_clip is not None)
+            self.status[view] = READY
+            if gt_clip is not None:
+                self.gt_status[view] = READY
+                self.psnr[view] = vm.psnr_db
+                tl.set_video_metrics(vm)
+                if self._on_video_metrics is not None:
+                    self._on_video_metrics(vm)
+        except InspectorError as exc:
+            if gt_clip is not None and exc.file == str(gt_clip.path):
+                # a broken GT clip: the imagined frames still show, without their GT
+                self.gt_status[view] = _one_line(exc)
+                try:
+                    run(with_gt=False)
+                    self.status[view] = READY
+                except Exception as again:
+                    self.status[view] = _one_line(again)
+            else:
+                self.status[view] = _one_line(exc)
+        except Exception as exc:  # one broken video never stops the others
+            self.status[view] = _one_line(exc)
         with self._lock:
-            self._halves[view] -= 1
-            if self._halves[view]:
-                return  # the view's other clip finishes the view
-        if self.status[view] == READY and self.gt_status[view] == READY:
-            try:
-                self.psnr[view] = tl.video_metrics(view).psnr_db
-            except Exception:
-                self.psnr[view] = None  # frames still show; only the PSNR is missing
-            self._notify()
+            self._filling.discard(view)
+        self._view_finished(view)
+
+    def _view_finished(self, view: str) -> None:
         with self._lock:
-            self._pending -= 1
-            finished = self._pending == 0
+            self._finished.add(view)
+            finished = len(self._finished) == len(self.views)
         if finished:
+            self.decoded.set()
             self.done.set()
-            self._notify()
+        self._notify()
+
+    def _keys(self, view: str) -> tuple[tuple, tuple]:
+        """Cache key prefixes of the view's imagined and GT clips (a GT clip shared by rollouts of
+        the same episode and start frame is cached once for all of them)."""
+        tl = self.timeline
+        gt = tl.gt.clips.get(view)
+        return ("imagined", *tl.rollout.video(view).key), ("gt", *(gt.key if gt is not None else (view,)))
+
+    def display_size(self, view: str) -> tuple[int, int]:
+        """(width, height) the view's frames are shown at: the imagined clip's, at most
+        :data:`DISPLAY_MAX_WIDTH` wide (GT frames are shown at the same size)."""
+        size = self._sizes.get(view)
+        if size is None:
+            info = self.timeline.rollout.video(view).info()
+            size = self._sizes[view] = fit_size(info.width, info.height, DISPLAY_MAX_WIDTH)
+        return size
+
+    def _store(self, view: str, key: tuple, rgb: npt.NDArray[np.uint8]) -> None:
+        size = self.display_size(view)
+        full_key = (*key, size)
+        if full_key not in self._cache:
+            self._cache.put(full_key, jpeg_data_uri(rgb, size))
 
     def add_listener(self, fn: Callable[[], None]) -> None:
         with self._lock:
@@ -145,52 +284,53 @@ class FrameStore:
         """The imagined frame of ``view`` at ``step`` and the GT frame at the same time."""
         tl = self.timeline
         f = tl.frame_index(step)
-        status = self.status.get(view, LOADING)
-        out = FramePair(view=view, status=status, imagined_index=f)
-        if status != READY:
+        out = FramePair(view=view, status=self.status.get(view, LOADING), imagined_index=f)
+        if out.status not in (LOADING, READY):
+            return out  # the imagined clip is broken: its error is the status
+        try:
+            size = self.display_size(view)
+        except Exception as exc:
+            out.status = _one_line(exc)
             return out
-        clip = tl.rollout.video(view)
-        f = int(min(f, len(clip) - 1))
-        out.imagined_index = f
-        out.imagined = self._cached(view, "imagined", f, lambda: clip.frames[f])
-        if self.gt_status[view] != READY:
+        imagined_key, gt_key = self._keys(view)
+        out.imagined = self._cache.get((*imagined_key, f, size))
+        if out.imagined is None:
+            out.status = LOADING
+            self._fill(view)  # evicted since (or still on its way): decode again in the background
+            return out
+        out.status = READY
+        if self.gt_status[view] not in (LOADING, READY):
             out.gt_note = self.gt_status[view]
             return out
-        gt_frame = tl.gt.frame(view, f, step)
-        if gt_frame is None:
-            out.gt_note = "past the real episode's end"
+        try:
+            gt_index = tl.gt.display_index(view, f, step)
+        except Exception as exc:  # an unreadable GT clip: its fill reports it too
+            out.gt_note = _one_line(exc)
             return out
-        out.gt = self._cached(view, "gt", step, lambda: gt_frame)
+        if gt_index is None:
+            out.gt_note = "past the real episode's end"
+        else:
+            out.gt = self._cache.get((*gt_key, gt_index, size))
+            if out.gt is None:
+                out.gt_note = LOADING
+                self._fill(view)
         psnr = self.psnr.get(view)
-        if psnr is not None and f < len(psnr) and np.isfinite(psnr[f]):
+        if out.gt is not None and psnr is not None and f < len(psnr) and np.isfinite(psnr[f]):
             out.psnr_db = float(psnr[f])
         return out
 
-    def _cached(self, view: str, kind: str, index: int, frame: Callable[[], np.ndarray]) -> str:
-        key = (view, kind, index)
-        uri = self._jpeg.get(key)
-        if uri is None:
-            uri = jpeg_data_uri(frame())
-            self._jpeg[key] = uri  # a race only encodes the same frame twice
-        return uri
 
-
-def jpeg_data_uri(frame: npt.NDArray[np.uint8], quality: int = JPEG_QUALITY) -> str:
-    """(H, W, 3) uint8 RGB -> ``data:image/jpeg;base64,...`` (~0.4 ms for 320x176)."""
+def jpeg_data_uri(frame: npt.NDArray[np.uint8], size: tuple[int, int] | None = None,
+                  quality: int = JPEG_QUALITY) -> str:
+    """(H, W, 3) uint8 RGB -> ``data:image/jpeg;base64,...``, scaled to ``size`` (width, height)."""
     from PIL import Image
 
+    image = Image.fromarray(np.ascontiguousarray(frame))
+    if size is not None and image.size != tuple(size):
+        image = image.resize(tuple(size), Image.Resampling.BILINEAR, reducing_gap=2.0)
     buf = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(frame)).save(buf, "JPEG", quality=quality)
+    image.save(buf, "JPEG", quality=quality)
     return "data:image/jpeg;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
-
-
-def _attempt(load: Callable[[], object]) -> str:
-    """Run a decode: READY, or the error as one line (one broken video never stops the others)."""
-    try:
-        load()
-        return READY
-    except Exception as exc:
-        return _one_line(exc)
 
 
 def _one_line(exc: BaseException) -> str:

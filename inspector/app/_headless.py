@@ -3,19 +3,27 @@
 viser counts a websocket connection as a client once it has sent its first camera message; from
 then on the app builds a :class:`~._state.TabState` for it exactly as for a browser tab. This
 client sends that one message (plus, optionally, GUI value updates as a browser would) and reads
-and discards everything the server sends, so the server's send queue never backs up.
+everything the server sends, so the server's send queue never backs up. With ``observe=True`` it
+also decodes the GUI messages, so a client of a server in another process can find a control by
+its label, set it, and wait for what the page shows (e.g. the video panel's frames).
 
 Usage::
 
     with HeadlessClient(app.port) as client:
         tab = app.wait_for_tabs(1)[0]
         tab.set_step(10)
+
+    with HeadlessClient(port, observe=True) as client:      # a server started by `inspector serve`
+        picker = client.wait_for_control("Rollout")
+        client.set_gui_value(picker, client.control(picker)["props"]["options"][3])
+        client.wait_until(lambda: "loading" not in client.html_containing("inspector-video"))
 """
 
 from __future__ import annotations
 
 import threading
-from typing import Any
+import time
+from typing import Any, Callable
 
 import msgspec
 
@@ -26,15 +34,19 @@ class HeadlessClient:
     Args:
         port: the server's port.
         host: the server's host.
+        observe: decode the GUI messages the server sends (see :meth:`control`).
     """
 
-    def __init__(self, port: int, host: str = "127.0.0.1") -> None:
+    def __init__(self, port: int, host: str = "127.0.0.1", observe: bool = False) -> None:
         import viser
         from websockets.sync.client import connect
 
         self._ws = connect(f"ws://{host}:{port}", subprotocols=[f"viser-v{viser.__version__}"],
                            max_size=None, open_timeout=10)
         self.received_bytes = 0
+        self._observe = observe
+        self._controls: dict[str, dict[str, Any]] = {}
+        self._changed = threading.Condition()
         self._stop = threading.Event()
         self._reader = threading.Thread(target=self._drain, name="headless-viser-client", daemon=True)
         self._reader.start()
@@ -46,6 +58,54 @@ class HeadlessClient:
         """Send what a browser sends when the user changes a control (e.g. drags a slider)."""
         self._send_message("GuiUpdateMessage", uuid=uuid, updates={"value": value})
 
+    # -- observing (observe=True) ------------------------------------------------------------
+    def control(self, uuid: str) -> dict[str, Any]:
+        """The last known state of a GUI control: ``type``, ``value``, ``props`` (label, options,
+        content, ...)."""
+        with self._changed:
+            return dict(self._controls[uuid])
+
+    def find_control(self, label: str) -> str | None:
+        """The uuid of the control labelled ``label`` (None if the page has none yet)."""
+        with self._changed:
+            for uuid, c in self._controls.items():
+                if c["props"].get("label") == label:
+                    return uuid
+        return None
+
+    def wait_for_control(self, label: str, timeout: float = 60.0) -> str:
+        """The uuid of the control labelled ``label``, waiting for the page to create it."""
+        found: list[str] = []
+
+        def present() -> bool:
+            uuid = self.find_control(label)
+            if uuid is not None:
+                found.append(uuid)
+            return uuid is not None
+
+        self.wait_until(present, timeout, f"a control labelled {label!r}")
+        return found[0]
+
+    def html_containing(self, marker: str) -> str:
+        """The content of the HTML element whose content contains ``marker`` ("" if none)."""
+        with self._changed:
+            for c in self._controls.values():
+                content = c["props"].get("content")
+                if isinstance(content, str) and marker in content:
+                    return content
+        return ""
+
+    def wait_until(self, condition: Callable[[], bool], timeout: float = 60.0, what: str = "the page") -> None:
+        """Wait (re-checking whenever the server sends something) until ``condition()`` holds."""
+        deadline = time.monotonic() + timeout
+        with self._changed:
+            while not condition():
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise TimeoutError(f"waited {timeout:g} s for {what}")
+                self._changed.wait(min(left, 0.5))
+
+    # -- the connection ----------------------------------------------------------------------
     def _send_message(self, type_name: str, **fields: Any) -> None:
         self._ws.send(msgspec.msgpack.encode({"type": type_name, **fields}))
 
@@ -58,6 +118,33 @@ class HeadlessClient:
             except Exception:
                 return  # closed
             self.received_bytes += len(msg)
+            if self._observe and isinstance(msg, bytes):
+                self._read_gui(msg)
+
+    def _read_gui(self, raw: bytes) -> None:
+        """Keep the GUI messages of one window of viser's wire format: two little-endian sizes,
+        the zstd-compressed msgpack of the messages, then raw binary buffers (not needed here)."""
+        import zstandard
+
+        size = int.from_bytes(raw[:8], "little")
+        compressed = int.from_bytes(raw[8:16], "little")
+        inner = zstandard.ZstdDecompressor().decompress(raw[16:16 + compressed], max_output_size=size)
+        window = msgspec.msgpack.decode(inner)
+        with self._changed:
+            for m in window.get("messages", ()):
+                kind = m.get("type", "")
+                if kind.startswith("Gui") and "props" in m and "uuid" in m:
+                    self._controls[m["uuid"]] = {"type": kind, "value": m.get("value"), "props": dict(m["props"])}
+                elif kind == "GuiUpdateMessage" and m.get("uuid") in self._controls:
+                    control = self._controls[m["uuid"]]
+                    for key, value in (m.get("updates") or {}).items():
+                        if key == "value":
+                            control["value"] = value
+                        else:
+                            control["props"][key] = value
+                elif kind == "GuiRemoveMessage":
+                    self._controls.pop(m.get("uuid"), None)
+            self._changed.notify_all()
 
     def close(self) -> None:
         self._stop.set()

@@ -9,10 +9,12 @@ from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
+from ..cache import DEFAULT_FRAME_CACHE_MB, MetricsCache
 from ..errors import InspectorError
 from ..session import is_session
 from ..sources import BUNDLED_DEMO, Sources, open_sources
 from ._catalog import Catalog
+from ._frames import FrameCache
 from ._robot import SharedRobot, joint_child_links
 from ._state import TabState
 
@@ -26,20 +28,18 @@ class InspectorApp:
     Args:
         sources: opened sessions (kept open, closed by :meth:`stop`).
         host, port: where to listen (port 0 picks a free port; a busy port moves up by one).
+        cache_mb: the budget of the frame cache shared by every tab [MiB].
+        metrics_cache: where video metrics are read and kept (default: the user's cache).
 
     Attributes:
         catalog: the served rollouts and their shared data.
         tabs: ``{client_id: TabState}`` of the connected tabs.
     """
 
-    def __init__(self, sources: Sources, host: str = "127.0.0.1", port: int = 8080) -> None:
-        import torch
+    def __init__(self, sources: Sources, host: str = "127.0.0.1", port: int = 8080,
+                 cache_mb: float = DEFAULT_FRAME_CACHE_MB, metrics_cache: MetricsCache | None = None) -> None:
         import viser
 
-        # A scrub step runs a handful of tiny tensor ops; torch's worker threads cost more to wake
-        # than they save, and spin-wait badly when the browser shares the CPU (540-pose FK: 1 ms
-        # with one thread, up to 180 ms with two on a busy 2-core machine).
-        torch.set_num_threads(1)
         self.sources = sources
         self.tabs: dict[int, TabState] = {}
         self._tabs_changed = threading.Condition()
@@ -48,7 +48,9 @@ class InspectorApp:
         loader = ThreadPoolExecutor(1, thread_name_prefix="inspector-robot")
         self._robot: Future[SharedRobot] = loader.submit(_load_robot)
         loader.shutdown(wait=False)  # the one job still runs; the thread exits after it
-        self.catalog = Catalog(sources, self._decoder, joint_child_links())
+        self.frame_cache = FrameCache(int(cache_mb * 2**20))
+        self.catalog = Catalog(sources, self._decoder, joint_child_links(), self.frame_cache,
+                               metrics_cache if metrics_cache is not None else MetricsCache())
         self.server = viser.ViserServer(host=host, port=port, label="inspector", verbose=False)
         self.server.initial_camera.position = (0.40, -0.32, 0.28)
         self.server.initial_camera.look_at = (0.10, 0.0, 0.10)
@@ -120,7 +122,8 @@ def _load_robot() -> SharedRobot:
 
 
 def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", port: int = 8080,
-          share: bool = False, dataset: str | Path | None = None, block: bool = True) -> InspectorApp:
+          share: bool = False, dataset: str | Path | None = None, block: bool = True,
+          cache_mb: float = DEFAULT_FRAME_CACHE_MB, use_cache: bool = True) -> InspectorApp:
     """Serve sessions in the browser (the bundled demo when ``paths`` is empty).
 
     Args:
@@ -130,6 +133,8 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
         share: also request a public viser share URL.
         dataset: LeRobot dataset with the GT episodes, for sessions that name none.
         block: serve until Ctrl-C (then stop); False returns the running app at once.
+        cache_mb: frame cache budget [MiB] (JPEGs sent to browsers, shared by all tabs).
+        use_cache: read and keep video metrics in the on-disk metrics cache.
 
     Returns:
         The :class:`InspectorApp` (``.port``, ``.url``, ``.stop()``, ``.tabs``).
@@ -144,7 +149,8 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
                                  "`inspector demo --rebuild`, or serve a session: `inspector serve PATH`")
         paths = [BUNDLED_DEMO]
     sources = open_sources(paths, dataset=dataset, confine=True)  # no link leads out of a root
-    app = InspectorApp(sources, host=host, port=port)
+    app = InspectorApp(sources, host=host, port=port, cache_mb=cache_mb,
+                       metrics_cache=MetricsCache(enabled=use_cache))
     n_ok = sum(len(s.rollouts) for s in sources.sessions)
     n_bad = sum(len(s.errors) for s in sources.sessions)
     print(f"inspector: serving {n_ok} rollout(s) from {len(sources.sessions)} session(s)"

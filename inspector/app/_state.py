@@ -283,7 +283,9 @@ class TabState:
         with self.lock:
             if self.loaded is None:
                 return self.step
-            return self.set_chunk(self.loaded.timeline.worst_chunk(), 0)
+            chunk, why = self.loaded.timeline.worst_chunk()
+            self._notify(f"Worst chunk: {chunk}", why)
+            return self.set_chunk(chunk, 0)
 
     def _limit_text(self, step: int) -> list[str]:
         tl = self.loaded.timeline  # type: ignore[union-attr]

@@ -1,0 +1,222 @@
+"""The work of ``inspector report``, cut into tasks that run anywhere: in this process, in a pool
+of worker processes (``--jobs``), or on any executor that can call :func:`run_task`.
+
+A task names rollouts by (session directory, tag), never carries their data: a worker reads
+them from disk, so tasks stay tiny and a worker holds one task's rollouts at a time. Rollouts
+that share a GT episode go to the same task, where their joint metrics run as one batch and
+their videos are compared in one pass over the GT clip (decoded once per task, not once per
+rollout). Each result is the rollout's summary row, stored in the metrics cache.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterator, Sequence
+
+from .errors import InspectorError
+
+# Rollouts per task at most: a task's rollouts are compared against their GT in one pass, one
+# open decoder each.
+MAX_TASK_ROLLOUTS = 32
+
+
+@dataclass(frozen=True)
+class Task:
+    """Rollouts of one session for one worker.
+
+    Attributes:
+        session_root: the session directory.
+        tags: the rollouts' tags.
+        dataset: a GT dataset that replaces the session's (``--dataset``), or None.
+        limit_margin_deg: joint-limit margin [deg].
+        cache_dir: the metrics cache directory (None: the default one).
+        use_cache: read and write the metrics cache.
+    """
+
+    session_root: str
+    tags: tuple[str, ...]
+    dataset: str | None
+    limit_margin_deg: float
+    cache_dir: str | None = None
+    use_cache: bool = True
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """One rollout's result: its row, or the one-line error that kept it from one."""
+
+    session_root: str
+    tag: str
+    row: dict[str, Any] | None = None
+    error_file: str | None = None
+    error: str | None = None
+    cached: bool = False
+
+
+def plan_tasks(sessions: Sequence[Any], jobs: int, limit_margin_deg: float, cache_dir: str | None = None,
+               use_cache: bool = True) -> list[Task]:
+    """Tasks for every loaded rollout of ``sessions`` (:class:`inspector.session.Session`).
+
+    Rollouts of one session that start from the same dataset episode and frame, with the same
+    kind and shape, share tasks; groups are cut so that every worker gets a few tasks.
+    """
+    groups: dict[tuple, list[str]] = defaultdict(list)
+    for session in sessions:
+        dataset = session.dataset_root
+        for tag in sorted(session.rollouts):
+            r = session.rollouts[tag]
+            same_gt: Any = ((str(dataset), r.episode_index, r.start_frame, r.kind, r.actions_shape,
+                             r.steps_per_chunk) if dataset is not None and r.episode_index is not None
+                            and not r.has_gt_joints and not r.gt_views else tag)
+            groups[(str(session.root), same_gt)].append(tag)
+    n_rollouts = sum(len(tags) for tags in groups.values())
+    # two tasks per worker: larger tasks share more GT decoding, and the last ones still balance
+    per_task = max(1, min(MAX_TASK_ROLLOUTS, math.ceil(n_rollouts / (2 * max(1, jobs)))))
+    tasks = []
+    by_root = {str(s.root): s for s in sessions}
+    for (root, _), tags in groups.items():
+        override = by_root[root].gt_source.get("dataset")
+        for i in range(0, len(tags), per_task):
+            tasks.append(Task(root, tuple(tags[i:i + per_task]), override, limit_margin_deg, cache_dir, use_cache))
+    return tasks
+
+
+def run_tasks(tasks: Sequence[Task], jobs: int) -> Iterator[list[Outcome]]:
+    """Each task's outcomes as it finishes: here when ``jobs`` <= 1, else in worker processes."""
+    if jobs <= 1 or len(tasks) <= 1:
+        for task in tasks:
+            yield run_task(task)
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
+
+    # spawn: a clean interpreter per worker (no inherited threads or locks)
+    with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), initializer=_init_worker,
+                             mp_context=multiprocessing.get_context("spawn")) as pool:
+        futures = {pool.submit(run_task, task): task for task in tasks}
+        for future in as_completed(futures):
+            task = futures[future]
+            try:
+                yield future.result()
+            except BrokenProcessPool as exc:  # a worker died (killed, out of memory, a crash)
+                yield [Outcome(task.session_root, tag, error_file=str(Path(task.session_root) / "rollouts" / tag),
+                               error=f"the worker process computing it died ({exc})") for tag in task.tags]
+
+
+def _init_worker() -> None:
+    """One thread per worker process: the pool already keeps every core busy."""
+    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[var] = "1"  # before numpy loads in this process
+    from . import video
+
+    video.DECODE_THREADS = None
+
+
+def default_jobs() -> int:
+    """The cores this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+# ----------------------------------------------------------------------------------------------
+# In a worker
+
+
+def run_task(task: Task) -> list[Outcome]:
+    """Rows of a task's rollouts (from the cache where it has them)."""
+    from .cache import MetricsCache, rollout_key
+    from .ground_truth import resolve_ground_truth
+    from .session import ROLLOUTS_DIR, load_rollout, read_session
+
+    root = Path(task.session_root)
+    try:
+        session = read_session(root)
+    except InspectorError as exc:
+        return [Outcome(task.session_root, tag, error_file=exc.file, error=exc.what) for tag in task.tags]
+    if task.dataset is not None:
+        session.gt_source["dataset"] = task.dataset
+    cache = MetricsCache(task.cache_dir, enabled=task.use_cache)
+    outcomes: list[Outcome] = []
+    todo: list[_Pending] = []
+    for tag in task.tags:
+        try:
+            rollout = load_rollout(root / ROLLOUTS_DIR / tag, session.units)
+            rollout.session = session
+            gt = resolve_ground_truth(rollout)
+            key = rollout_key(rollout, gt, task.limit_margin_deg)
+            record = cache.get(key) or {}
+            if record.get("row") is not None:
+                outcomes.append(Outcome(task.session_root, tag, row=record["row"], cached=True))
+                continue
+            todo.append(_Pending(rollout, gt, key, record))
+        except InspectorError as exc:
+            outcomes.append(Outcome(task.session_root, tag, error_file=exc.file, error=exc.what))
+    for batch in _batches(todo):
+        outcomes += _compute(batch, task, cache)
+    return outcomes
+
+
+@dataclass
+class _Pending:
+    rollout: Any
+    gt: Any
+    key: str
+    record: dict[str, Any]
+    timeline: Any = None
+
+
+def _batches(todo: list[_Pending]) -> list[list[_Pending]]:
+    """Rollouts that can share one joint-metric batch and one pass over their GT clips."""
+    from .timeline import batch_key
+
+    groups: dict[Any, list[_Pending]] = defaultdict(list)
+    for i, p in enumerate(todo):
+        groups[batch_key(p.rollout, p.gt) or i].append(p)
+    return list(groups.values())
+
+
+def _compute(batch: list[_Pending], task: Task, cache) -> list[Outcome]:
+    """Rows of a batch; a failure is pinned on its rollout by computing the batch one by one."""
+    try:
+        return _compute_together(batch, task, cache)
+    except Exception as exc:
+        if len(batch) > 1:
+            return [o for p in batch for o in _compute([p], task, cache)]
+        if not isinstance(exc, InspectorError):  # not foreseen: still one line, naming the rollout
+            exc = InspectorError(batch[0].rollout.root, f"cannot compute its metrics ({type(exc).__name__}: {exc})")
+        return [Outcome(task.session_root, batch[0].rollout.tag, error_file=exc.file, error=exc.what)]
+
+
+def _compute_together(batch: list[_Pending], task: Task, cache) -> list[Outcome]:
+    from .report_row import rollout_summary
+    from .timeline import build_timelines
+    from .video_metrics import VideoMetrics, compare_clips
+
+    timelines = build_timelines([p.rollout for p in batch], batch[0].gt, task.limit_margin_deg)
+    for p, tl in zip(batch, timelines):
+        p.timeline = tl
+        for view, data in (p.record.get("video") or {}).items():
+            tl.set_video_metrics(VideoMetrics.from_json(data))
+    views = sorted({v for tl in timelines for v in tl.video_views()})
+    for view in views:
+        need = [tl for tl in timelines if view in tl.video_views() and view not in tl.known_video_metrics()]
+        if need:
+            gt_clip = need[0].gt.clips[view]
+            results = compare_clips(view, [tl.rollout.video(view) for tl in need], gt_clip,
+                                    need[0].gt_index_of_frame(view))
+            for tl, vm in zip(need, results):
+                tl.set_video_metrics(vm)
+    outcomes = []
+    for p in batch:
+        video = p.timeline.known_video_metrics()
+        row = rollout_summary(p.timeline, video)
+        cache.put(p.key, {"row": row, "video": {v: vm.to_json() for v, vm in video.items()}})
+        outcomes.append(Outcome(task.session_root, p.rollout.tag, row=row))
+    return outcomes

@@ -1,0 +1,280 @@
+"""Evaluation scale: memory bounded by budgets, not by how many rollouts exist or were opened.
+
+The figures themselves (time, peak RSS at 200 / 1,000 rollouts) are in ``benchmarks/run.py``;
+these tests check the mechanisms: the frame cache's budget and eviction, reopening, the decode
+bound on huge clips, report workers and the metrics cache giving the same numbers, and the
+prompt pairing staying linear.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from inspector.app._frames import FrameCache
+from inspector.errors import InspectorError
+from inspector.report import build_report
+from inspector.report_jobs import Task, run_task
+from inspector.report_row import prompt_pairs
+from inspector.session import SessionWriter
+from inspector.video import VideoClip, encode_h264
+
+REPO = Path(__file__).resolve().parents[1]
+DEMO = REPO / "sessions" / "demo"
+BEFORE = Path(__file__).resolve().parent / "data" / "report_demo_before_scale.json"
+
+
+# ----------------------------------------------------------------------------------------------
+# Frame cache
+
+
+def test_frame_cache_evicts_least_recently_used_within_budget():
+    cache = FrameCache(budget_bytes=100)
+    for i in range(5):
+        cache.put(("clip", i), "x" * 30)
+    assert cache.bytes <= 100 and len(cache) == 3 and cache.evictions == 2
+    assert cache.get(("clip", 0)) is None and cache.get(("clip", 4)) == "x" * 30
+    cache.get(("clip", 2))  # used: now the most recent
+    cache.put(("clip", 5), "y" * 30)
+    assert ("clip", 2) in cache and ("clip", 3) not in cache
+    cache.put(("huge",), "z" * 101)  # larger than the whole budget: not kept, nothing evicted for it
+    assert ("huge",) not in cache and len(cache) == 3
+
+
+@pytest.fixture()
+def small_budget_app():
+    from inspector.app import InspectorApp
+    from inspector.cache import MetricsCache
+    from inspector.sources import open_sources
+
+    # one autoregressive demo rollout's frames (two views, imagined + GT) take ~25 MB as JPEG
+    app = InspectorApp(open_sources([DEMO], confine=True), port=0, cache_mb=30,
+                       metrics_cache=MetricsCache(enabled=False))
+    yield app
+    app.stop()
+
+
+def test_app_memory_follows_the_frame_budget(small_budget_app):
+    from inspector.app import HeadlessClient
+
+    app = small_budget_app
+    keys = {app.catalog.get(k).tag: k for k in app.catalog.keys()}
+    with HeadlessClient(app.port):
+        tab = app.wait_for_tabs(1)[0]
+        for tag in ("tempo_0.8x", "bias_elbow", "limits_wrist", "prompt_train"):
+            assert tab.open(keys[tag])
+            assert tab.loaded.frames.decoded.wait(120), tag
+            assert app.frame_cache.bytes <= app.frame_cache.budget_bytes
+        assert app.frame_cache.evictions > 0  # four rollouts' frames do not fit: the oldest went
+
+        # the last one is still cached: reopening it needs no decoding at all
+        tab.open(keys["tempo_0.8x"])
+        assert tab.open(keys["prompt_train"])
+        assert tab.loaded.frames.decoded.is_set()
+        tab.set_step(100, force=True)
+        assert all(p.imagined and p.gt for p in tab.pairs)
+
+        # an evicted one decodes again in the background and shows its frames
+        assert tab.open(keys["tempo_0.8x"])
+        assert tab.loaded.frames.decoded.wait(120)
+        deadline = time.monotonic() + 60
+        while not all(p.imagined and p.gt for p in tab.pairs) and time.monotonic() < deadline:
+            time.sleep(0.1)
+            tab.set_step(100, force=True)
+        assert all(p.imagined and p.gt for p in tab.pairs)
+        assert app.frame_cache.bytes <= app.frame_cache.budget_bytes
+
+
+def test_rollouts_sharing_a_gt_episode_share_its_cached_frames(small_budget_app):
+    """bias_elbow and tempo_0.8x both start at frame 0 of demo episode 0: one set of GT JPEGs."""
+    app = small_budget_app
+    a = app.catalog.load(next(k for k in app.catalog.keys() if k.endswith("bias_elbow")))
+    b = app.catalog.load(next(k for k in app.catalog.keys() if k.endswith("tempo_0.8x")))
+    assert a.frames._keys("front")[1] == b.frames._keys("front")[1]
+    assert a.frames._keys("front")[0] != b.frames._keys("front")[0]
+
+
+# ----------------------------------------------------------------------------------------------
+# Decoding stays within its budget
+
+
+def _peak_rss_mib(args: list[str], env: dict[str, str]) -> tuple[subprocess.CompletedProcess, float]:
+    import psutil
+
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    root, peak = psutil.Process(proc.pid), 0
+    while proc.poll() is None:
+        total = 0
+        for p in [root, *root.children(recursive=True)]:
+            try:
+                total += p.memory_info().rss
+            except psutil.Error:
+                pass
+        peak = max(peak, total)
+        time.sleep(0.02)
+    out, err = proc.communicate()
+    return subprocess.CompletedProcess(args, proc.returncode, out, err), peak / 2**20
+
+
+def _moving_frames(n: int, width: int, height: int):
+    """A bright square moving over a gradient, one frame at a time (never the whole clip)."""
+    base = np.zeros((height, width, 3), np.uint8)
+    base[..., 0] = np.linspace(0, 255, width, dtype=np.uint8)[None]
+    base[..., 2] = 90
+    for i in range(n):
+        frame = base.copy()
+        x = (width - 200) * i // max(n - 1, 1)
+        frame[height // 3: height // 3 + 200, x: x + 200] = 250
+        yield frame
+
+
+@pytest.mark.slow
+def test_a_huge_clip_is_streamed_not_held(tmp_path):
+    """200 frames of 2560x1440 (2.2 GB decoded) as imagined and GT video: report and export stay
+    far below that, because no clip is ever held whole."""
+    clip = tmp_path / "big.mp4"
+    encode_h264(clip, _moving_frames(200, 2560, 1440), fps=30, preset="ultrafast")
+    with SessionWriter.create(tmp_path / "s") as w:
+        w.add_rollout("big", kind="autoregressive", actions=np.zeros((23, 24, 6)) + [0, 0, 0, 0, 0, 50],
+                      gt_actions=np.zeros((207, 6)) + [0, 0, 0, 0, 0, 50],
+                      videos={"front": clip}, gt_videos={"front": clip})
+    env = {**os.environ, "INSPECTOR_CACHE_DIR": str(tmp_path / "cache")}
+    done, peak = _peak_rss_mib([sys.executable, "-m", "inspector", "report", str(tmp_path / "s"), "--json",
+                                "--jobs", "1"], env)
+    assert done.returncode == 0, done.stderr
+    row = json.loads(done.stdout)["rollouts"][0]
+    assert row["video_psnr_db"]["front"] > 60  # the clip against itself
+    assert peak < 900, f"report held {peak:.0f} MiB"
+    done, peak = _peak_rss_mib([sys.executable, "-m", "inspector", "export", str(tmp_path / "s"), "-o",
+                                str(tmp_path / "big.rrd"), "--no-cache"], env)
+    assert done.returncode == 0, done.stderr
+    assert peak < 900, f"export held {peak:.0f} MiB"
+
+
+def test_whole_clip_decoding_refuses_past_its_budget(tmp_path):
+    clip = tmp_path / "c.mp4"
+    encode_h264(clip, _moving_frames(20, 320, 240), fps=30, preset="ultrafast")
+    assert VideoClip(clip).decode().shape == (20, 240, 320, 3)
+    with pytest.raises(InspectorError, match=r"more than 1 MiB decoded at 320x240.*frame by frame") as exc:
+        VideoClip(clip).decode(max_bytes=2**20)
+    assert exc.value.file == str(clip) and "\n" not in str(exc.value)
+
+
+@pytest.mark.slow
+def test_frames_past_8k_are_refused_in_one_line(tmp_path):
+    clip = tmp_path / "huge.mp4"
+    encode_h264(clip, _moving_frames(1, 8192, 4352), fps=30, preset="ultrafast")
+    with SessionWriter.create(tmp_path / "s") as w:
+        w.add_rollout("ok", kind="single_chunk", actions=np.zeros((1, 24, 6)), gt_actions=np.zeros((24, 6)))
+        w.add_rollout("huge", kind="single_chunk", actions=np.zeros((1, 24, 6)), gt_actions=np.zeros((24, 6)),
+                      videos={"front": clip}, gt_videos={"front": clip})
+    report = build_report([str(tmp_path / "s")], jobs=1, use_cache=False)
+    assert [r["tag"] for r in report["rollouts"]] == ["ok"]
+    error = report["errors"]["s/huge"]
+    assert "8192x4352" in error and "pixel limit" in error and "huge/video/front.mp4" in error
+    assert "\n" not in error
+
+
+# ----------------------------------------------------------------------------------------------
+# report: the same numbers however it runs
+
+
+def _close(a, b, path: str, rel: float) -> None:
+    if isinstance(a, dict):
+        assert set(a) <= set(b) | {"worst_chunk", "start_frame", "n_chunks"}, path
+        for k in a:
+            if k in b:
+                _close(a[k], b[k], f"{path}.{k}", rel)
+    elif isinstance(a, list):
+        assert len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b)):
+            _close(x, y, f"{path}[{i}]", rel)
+    elif isinstance(a, float) and isinstance(b, float):
+        assert a == pytest.approx(b, rel=rel, abs=1e-9), path
+    else:
+        assert a == b, path
+
+
+def test_report_gives_the_numbers_it_gave_before_streaming():
+    """The demo's report as the previous, all-in-memory version computed it (margin 0 there)."""
+    before = json.loads(BEFORE.read_text())
+    now = build_report([str(DEMO)], jobs=2, use_cache=False, limit_margin_deg=0.0)
+    old_rows = {r["tag"]: r for r in before["rollouts"]}
+    assert [r["tag"] for r in now["rollouts"]] == list(old_rows)
+    for row in now["rollouts"]:
+        old = old_rows[row["tag"]]
+        for key in ("rmse_deg", "per_joint_rmse", "per_step_mse", "time_aligned_drift", "best_match_drift",
+                    "tempo", "video_psnr_db", "post_episode_chunks"):
+            _close(row[key], old[key], f"{row['tag']}.{key}", rel=1e-12)
+        # FK is now exact to 1e-15 m (it was 5e-7 m off through a float32 URDF parse); DTW's path
+        # search may break a float32 tie the other way
+        _close(row["ee_error_mm"], old["ee_error_mm"], f"{row['tag']}.ee_error_mm", rel=1e-6)
+        assert row["dtw_drift"]["mean"] == pytest.approx(old["dtw_drift"]["mean"], rel=1e-3)
+        assert row["limit_violations"]["count"] == old["limit_violations"]["count"]
+        assert row["limit_violations"]["by_joint"] == old["limit_violations"]["by_joint"]
+
+
+def test_report_is_the_same_with_one_or_two_workers_and_from_the_cache(tmp_path):
+    one = build_report([str(DEMO)], jobs=1, cache_dir=str(tmp_path / "cache"))
+    two = build_report([str(DEMO)], jobs=2, use_cache=False)
+    cached = build_report([str(DEMO)], jobs=2, cache_dir=str(tmp_path / "cache"))
+    assert one == two == cached
+
+
+def test_metrics_cache_hits_and_invalidates(tmp_path):
+    import shutil
+
+    session = tmp_path / "demo"
+    shutil.copytree(DEMO, session, ignore=shutil.ignore_patterns("single_*"))
+    task = Task(str(session), ("bias_elbow", "tempo_0.8x"), None, 2.0, str(tmp_path / "cache"))
+    first = run_task(task)
+    assert [o.cached for o in first] == [False, False]
+    assert [o.cached for o in run_task(task)] == [True, True]
+    # a changed rollout file is computed again; the other still comes from the cache
+    actions = session / "rollouts" / "tempo_0.8x" / "actions.npy"
+    a = np.load(actions)
+    np.save(actions, a + 1.0)
+    again = {o.tag: o for o in run_task(task)}
+    assert again["bias_elbow"].cached and not again["tempo_0.8x"].cached
+    assert again["tempo_0.8x"].row["time_aligned_drift"] != first[1].row["time_aligned_drift"]
+    # a different joint-limit margin is another entry
+    other = Task(str(session), ("bias_elbow",), None, 5.0, str(tmp_path / "cache"))
+    assert not run_task(other)[0].cached
+
+
+def test_a_broken_rollout_in_a_batch_fails_alone(tmp_path):
+    import shutil
+
+    session = tmp_path / "demo"
+    shutil.copytree(DEMO, session, ignore=shutil.ignore_patterns("single_*"))
+    video = session / "rollouts" / "bias_elbow" / "video" / "wrist.mp4"
+    video.write_bytes(video.read_bytes()[:5000])  # truncated: undecodable after a few frames
+    report = build_report([str(session)], jobs=1, use_cache=False)
+    assert "bias_elbow" not in [r["tag"] for r in report["rollouts"]]
+    assert "wrist.mp4" in report["errors"]["demo/bias_elbow"]
+    assert {"tempo_0.8x", "limits_wrist", "prompt_train"} <= {r["tag"] for r in report["rollouts"]}
+
+
+# ----------------------------------------------------------------------------------------------
+# Prompt pairs
+
+
+def test_prompt_pairs_are_matched_by_tag_and_linear_in_count():
+    entries = [((s, i), ("s", 0, 0), f"ep{i:05d}_train", "Pick the red cube") for s in ("a",) for i in range(5000)]
+    entries += [(("b", i), ("s", 0, 0), f"ep{i:05d}_novel", "Pick the blue cube") for i in range(5000)]
+    entries += [(("c", 0), ("s", 0, 0), "prompt_novel", "Pick the green cube")]
+    start = time.perf_counter()
+    pairs = prompt_pairs(entries)
+    assert time.perf_counter() - start < 5  # all-against-all would be 25 M comparisons
+    by_tag = {(a, b) for a, b in pairs}
+    assert (("b", 7), ("a", 7)) in by_tag  # ep00007_novel with ep00007_train
+    assert len(pairs) == 5000 + 2  # each novel with its train; green (alone) with one of each
+    # a different start frame never pairs
+    assert prompt_pairs([(1, ("s", 0, 0), "x_train", "A"), (2, ("s", 0, 10), "x_novel", "B")]) == []
