@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import threading
 import time
 from collections.abc import Sequence
@@ -18,8 +17,9 @@ from ._frames import FrameCache
 from ._robot import SharedRobot, joint_child_links
 from ._state import TabState
 
-# Video decoders (PyAV decodes outside the GIL): one per core, up to four.
-DECODE_WORKERS = max(2, min(4, os.cpu_count() or 2))
+# Background frame loaders, one per camera view of an opening rollout (up to four): decoding and
+# JPEG encoding run outside the GIL, so views fill side by side and the cores stay busy.
+DECODE_WORKERS = 4
 
 
 class InspectorApp:
