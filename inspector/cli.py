@@ -66,7 +66,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
     from .export import export_cli
 
     return export_cli(args.path, args.output, rollout=args.rollout, views=args.views,
-                      dataset=args.dataset, use_cache=not args.no_cache, limit_margin_deg=args.limit_margin)
+                      dataset=args.dataset, use_cache=not args.no_cache, limit_margin_deg=args.limit_margin,
+                      episodes=args.episode)
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -130,7 +131,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_info)
 
     p = sub.add_parser("report", help="drift metrics as tables or JSON")
-    p.add_argument("paths", nargs="+", help="sessions, rollouts or DreamZero-SO101 source dirs")
+    p.add_argument("paths", nargs="+", help="sessions, rollouts, DreamZero-SO101 source dirs or LeRobot "
+                                             "datasets (a directory or org/name in the local cache)")
     p.add_argument("--json", action="store_true")
     p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
     p.add_argument("--jobs", "-j", type=_positive_int, default=None,
@@ -141,7 +143,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_report)
 
     p = sub.add_parser("serve", help="the web app (default: the bundled demo session)")
-    p.add_argument("paths", nargs="*", help="sessions, rollouts or DreamZero-SO101 source dirs")
+    p.add_argument("paths", nargs="*", help="sessions, rollouts, DreamZero-SO101 source dirs or LeRobot "
+                                            "datasets (a directory or org/name in the local cache)")
     p.add_argument("--host", default="127.0.0.1", help="interface to bind (default loopback only)")
     p.add_argument("--port", type=int, default=8080)
     p.add_argument("--share", action="store_true", help="also open a public viser share link")
@@ -153,9 +156,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_serve)
 
     p = sub.add_parser("export", help="write a Rerun .rrd recording")
-    p.add_argument("path", help="a session, a rollout or a DreamZero-SO101 source dir")
-    p.add_argument("-o", "--output", required=True, help=".rrd file (or directory for several rollouts)")
+    p.add_argument("path", help="a session, a rollout, a DreamZero-SO101 source dir or a LeRobot dataset")
+    p.add_argument("-o", "--output", default=".",
+                   help=".rrd file (or directory for several rollouts; default: the current directory)")
     p.add_argument("--rollout", help="tag of the rollout to export (default: all)")
+    p.add_argument("--episode", type=int, action="append", metavar="N",
+                   help="a LeRobot dataset's episode to export (repeat for several)")
     p.add_argument("--views", nargs="*", help="camera views to include (default: all)")
     p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the metrics cache")

@@ -72,6 +72,7 @@ def write_recording(timeline: RolloutTimeline, path: str | Path, views: Sequence
         views={v: (v in timeline.rollout.views, v in timeline.gt.views) for v in views},
         gt_joints=timeline.has_gt_joints,
         psnr_views=[v for v, series in psnr.items() if np.isfinite(series).any()],
+        pred_name=timeline.labels.pred, gt_name=timeline.labels.gt, chunks=timeline.n_chunks > 1,
     )
     path.parent.mkdir(parents=True, exist_ok=True)
     # a fresh name the stream creates itself (mkstemp's 0600 would stick to the final file)
@@ -174,11 +175,13 @@ def cached_video_metrics(tl: RolloutTimeline, cache) -> Iterator[None]:
 
 def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
                views: Sequence[str] | None = None, dataset: str | Path | None = None,
-               use_cache: bool = True, limit_margin_deg: float | None = None) -> int:
-    """``inspector export``: write one recording per rollout; returns the exit code.
+               use_cache: bool = True, limit_margin_deg: float | None = None,
+               episodes: Sequence[int] | None = None) -> int:
+    """``inspector export``: write one recording per rollout (or dataset episode); returns the exit code.
 
     Args:
-        path: a session, a rollout directory, or a DreamZero-SO101 source directory.
+        path: a session, a rollout directory, a DreamZero-SO101 source directory, or a LeRobot
+            dataset (with ``episodes``).
         output: a ``.rrd`` file when one rollout is exported; otherwise (or when it is an
             existing directory) a directory that receives ``<tag>.rrd`` per rollout.
         rollout: export only the rollout with this tag.
@@ -186,6 +189,7 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
         dataset: LeRobot dataset with the GT episodes.
         use_cache: take video metrics from the metrics cache (and keep new ones there).
         limit_margin_deg: joint-limit margin [deg] (default: the usual 2 deg).
+        episodes: the dataset episodes to export (``path`` a dataset).
 
     Bad input prints ``error: <file>: <what>`` to stderr and returns 2; the other rollouts of a
     session are still exported when one of them is broken.
@@ -200,8 +204,12 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
     cache = MetricsCache(enabled=use_cache)
     errors = 0
     try:
-        sources = open_sources([path], dataset=dataset)
+        sources = open_sources([path], dataset=dataset, datasets=True)
         try:
+            if sources.datasets:
+                return _export_episodes(sources.datasets[0], episodes, Path(output), views, margin)
+            if episodes:
+                raise InspectorError(path, "--episode applies to a LeRobot dataset; this is a session")
             targets = _plan_outputs(sources, Path(path), Path(output), rollout, views)
             for session, tag, dest in targets:
                 if tag in session.errors:
@@ -227,6 +235,42 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
     except InspectorError as exc:
         _print_error(exc)
         return 2
+    return 2 if errors else 0
+
+
+def _export_episodes(ds, episodes: Sequence[int] | None, output: Path, views: Sequence[str] | None,
+                     margin: float) -> int:
+    """Recordings of dataset episodes: the commanded and measured arms, the cameras, the series."""
+    from .episodes import dataset_name, episode_rollout
+    from .progress import FractionBar
+    from .timeline import build_timeline
+
+    if not episodes:
+        raise InspectorError(ds.root, f"choose the episode(s) to export with --episode N "
+                                      f"(episodes {ds.describe_episodes()})")
+    missing = [i for i in episodes if i not in ds.episode_indexes()]
+    if missing:
+        raise InspectorError(ds.root, f"no episode {missing[0]}; episodes {ds.describe_episodes()}")
+    name = dataset_name(ds).replace("/", "_")
+    one_file = output.suffix == RRD_SUFFIX and not output.is_dir()
+    if one_file and len(episodes) > 1:
+        raise InspectorError(output, f"one file for {len(episodes)} episodes; give a directory")
+    if not one_file and output.exists() and not output.is_dir():
+        raise InspectorError(output, "exists and is not a directory")
+    errors = 0
+    for index in dict.fromkeys(episodes):
+        dest = output if one_file else output / f"{name}_episode_{index}{RRD_SUFFIX}"
+        bar = FractionBar(f"episode {index}")
+        try:
+            rollout, gt = episode_rollout(ds, index)
+            write_recording(build_timeline(rollout, gt=gt, limit_margin_deg=margin), dest, views=views, progress=bar)
+        except InspectorError as exc:
+            _print_error(exc)
+            errors += 1
+            continue
+        finally:
+            bar.close()
+        print(f"wrote {dest} ({format_size(dest.stat().st_size)})")
     return 2 if errors else 0
 
 

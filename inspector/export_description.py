@@ -17,6 +17,8 @@ def describe(tl: RolloutTimeline, psnr_db: Mapping[str, float | None]) -> str:
     Args:
         psnr_db: mean PSNR [dB] per view (None where the view has no GT frame).
     """
+    if tl.kind == "episode":
+        return describe_episode(tl)
     r = tl.rollout
     session = r.session
     model = dict(session.model) if session is not None else {}
@@ -64,6 +66,54 @@ def describe(tl: RolloutTimeline, psnr_db: Mapping[str, float | None]) -> str:
     if not tl.has_gt_joints:
         lines.append("- No GT joints were available: drift plots and the GT arm are absent; "
                      "the prediction, its limits and the videos still are.")
+    return "\n".join(lines) + "\n"
+
+
+def describe_episode(tl: RolloutTimeline) -> str:
+    """Markdown for the recording of a dataset episode: commanded (``action``) vs measured
+    (``observation.state``) arm, how well the follower tracked its command."""
+    from . import metrics
+
+    r = tl.rollout
+    unit = "deg" if tl.units.arm == "degrees" else "units"
+    measured_excess = metrics.limit_excess(tl.gt_aligned, tl.limits)
+    measured = metrics.LimitSummary.of(measured_excess > tl.limit_margin, measured_excess)
+    commanded = tl.limit_summary()
+    rmse = tl.chunk_errors.per_joint_rmse if tl.chunk_errors is not None else None
+    lines = [
+        f"# Episode {r.episode_index} of `{r.extra.get('dataset_name', '')}`",
+        "",
+        f"**Task:** {r.prompt or '(none)'}  ",
+        f"**Length:** {tl.n_steps} frames at {tl.fps:g} fps ({tl.n_steps / tl.fps:.2f} s)  ",
+        f"**Units:** {tl.units.label()}  ",
+        f"**Cameras:** {', '.join(tl.gt.views) or 'none'}",
+        "",
+        "## Headline metrics",
+        "",
+        "| metric | value |",
+        "|---|---|",
+        f"| tracking error, mean / max | {_fmt(_mean(tl.time_aligned_drift))} / "
+        f"{_fmt(float(tl.time_aligned_drift.max()))} {unit} |",
+        *([f"| tracking RMSE, {j} | {_fmt(v, ' ' + unit, 2)} |" for j, v in zip(JOINT_NAMES, rmse)]
+          if rmse is not None else []),
+        f"| tool-point tracking error, mean / max | {_fmt(_mean(tl.ee_error_mm))} / "
+        f"{_fmt(float(tl.ee_error_mm.max()))} mm |",
+        f"| measured steps with a joint more than {tl.limit_margin_deg:g} deg past its limit | "
+        f"{measured.steps} of {tl.n_steps} |",
+        f"| commanded steps with a joint more than {tl.limit_margin_deg:g} deg past its limit | "
+        f"{commanded.steps} of {tl.n_steps} |",
+        "",
+        "## How to read this recording",
+        "",
+        "- **3D view:** the measured arm (`observation.state`) is opaque, the commanded arm (`action`: "
+        "on a leader-follower SO-101, the leader's position) translucent; the lines are their "
+        "tool-point paths.",
+        "- **Videos:** the episode's cameras.",
+        "- **Tracking error** is `||action - state||` over the 6 joints at each frame, in data units; "
+        "*joint error* the same per joint, signed. A follower lagging its leader shows as a steady "
+        "error while moving.",
+        "- **Markers:** red crosses in the joint plots mark commanded values past their limit.",
+    ]
     return "\n".join(lines) + "\n"
 
 

@@ -141,11 +141,16 @@ class Contents:
         views: camera views, each with ``(has_imagined, has_gt)``.
         gt_joints: the GT arm, drift and error plots exist.
         psnr_views: views with a PSNR series.
+        pred_name, gt_name: the arms' names in titles.
+        chunks: the rollout has several chunks.
     """
 
     views: dict[str, tuple[bool, bool]] = field(default_factory=dict)
     gt_joints: bool = False
     psnr_views: list[str] = field(default_factory=list)
+    pred_name: str = "predicted"  # what the two arms are ("commanded" / "measured" for an episode)
+    gt_name: str = "GT"
+    chunks: bool = True  # more than one chunk (else no chunk RMSE plot)
 
 
 def build_blueprint(contents: Contents) -> rrb.Blueprint:
@@ -155,7 +160,8 @@ def build_blueprint(contents: Contents) -> rrb.Blueprint:
     if contents.gt_joints:
         plots.append(rrb.TimeSeriesView(name="Drift", origin=f"/{PLOTS}/drift",
                                         contents=["$origin/**", markers]))
-        plots.append(rrb.TimeSeriesView(name="Joint error (pred - GT)", origin=f"/{JOINT_ERROR}",
+        plots.append(rrb.TimeSeriesView(name=f"Joint error ({contents.pred_name} - {contents.gt_name})",
+                                        origin=f"/{JOINT_ERROR}",
                                         contents=["$origin/**", markers]))
         plots.append(rrb.TimeSeriesView(name="End-effector error [mm]", origin=f"/{EE_ERROR}",
                                         contents=["$origin", markers]))
@@ -166,19 +172,22 @@ def build_blueprint(contents: Contents) -> rrb.Blueprint:
     if contents.psnr_views:
         plots.append(rrb.TimeSeriesView(name="Video PSNR [dB]", origin=f"/{PLOTS}/psnr",
                                         contents=["$origin/**", markers]))
-    if contents.gt_joints:
+    if contents.gt_joints and contents.chunks:
         plots.append(rrb.TimeSeriesView(name="Chunk RMSE", origin=f"/{CHUNK_RMSE}",
                                         contents=["$origin", markers]))
 
+    title = (f"Arms: {contents.gt_name} (opaque) vs {contents.pred_name} (translucent)" if contents.gt_joints
+             else f"Arm: {contents.pred_name} (no GT joints)")
     scene = rrb.Spatial3DView(
-        name="Arms: GT (opaque) vs predicted (translucent)", origin=f"/{WORLD}",
+        name=title, origin=f"/{WORLD}",
         contents=["$origin/**"],
         eye_controls=rrb.EyeControls3D(position=(0.55, -0.45, 0.4), look_target=(0.15, 0.0, 0.1),
                                        eye_up=(0.0, 0.0, 1.0)),
     )
     pairs = [
         rrb.Horizontal(*[rrb.Spatial2DView(name=f"{view} {label}", origin=f"/{video_path(view, src)}")
-                         for src, label, present in (("imagined", "imagined", has[0]), ("gt", "GT", has[1]))
+                         for src, label, present in (("imagined", "imagined", has[0]),
+                                                     ("gt", "GT" if has[0] else "camera", has[1]))
                          if present], name=view)
         for view, has in contents.views.items()
     ]

@@ -102,7 +102,7 @@ def log_tool_paths(rec: rr.RecordingStream, tl: RolloutTimeline, indexes: Sequen
         paths.append(("gt", tl.ee_gt, L.GT_RGBA))
     for arm, ee, rgba in paths:
         rec.log(L.ee_path(arm), rr.LineStrips3D([ee], colors=[rgba], radii=0.002,
-                                                labels=[f"{'GT' if arm == 'gt' else 'predicted'} tool path"]),
+                                                labels=[f"{tl.labels.gt if arm == 'gt' else tl.labels.pred} tool path"]),
                 static=True)
         rec.log(L.ee_now(arm), rr.Points3D.from_fields(colors=[rgba], radii=0.008), static=True)
         rec.send_columns(L.ee_now(arm), indexes, rr.Points3D.columns(positions=ee))

@@ -48,6 +48,7 @@ def log_metric_series(rec: rr.RecordingStream, tl: RolloutTimeline, indexes_for:
     for attr, entity, name, rgba in L.DRIFT_SERIES:
         series = getattr(tl, attr)
         if series is not None:
+            name = tl.labels.drift if attr == "time_aligned_drift" else name  # an episode's tracking error
             log_series(rec, entity, steps, series, indexes_for, f"{name} [{unit}]", rgba)
     if tl.joint_error is not None:
         for j, joint in enumerate(JOINT_NAMES):
@@ -68,10 +69,10 @@ def log_joint_values(rec: rr.RecordingStream, tl: RolloutTimeline, indexes_for: 
     ends = np.array([0, tl.n_steps - 1])
     for j, joint in enumerate(JOINT_NAMES):
         log_series(rec, L.joint_plot(joint, "pred"), steps, tl.pred[:, j], indexes_for,
-                   f"{joint} predicted", L.PRED_RGBA)
+                   f"{joint} {tl.labels.pred}", L.PRED_RGBA)
         if tl.gt_aligned is not None:
             log_series(rec, L.joint_plot(joint, "gt"), steps, tl.gt_aligned[:, j], indexes_for,
-                       f"{joint} GT", L.GT_RGBA)
+                       f"{joint} {tl.labels.gt}", L.GT_RGBA)
         for k, side in enumerate(("lower_limit", "upper_limit")):
             log_series(rec, L.joint_plot(joint, side), ends, np.full(2, tl.limits[j, k]), indexes_for,
                        f"{joint} {side.replace('_', ' ')}", (120, 120, 120, 255), width=1.0)

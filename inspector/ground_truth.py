@@ -38,6 +38,7 @@ class GroundTruth:
         dataset_key: identity of the dataset episode the GT comes from (rollouts with the same key
             share their GT), or None for carried / no GT.
         files: the dataset files it was read from (caches key on their size and time).
+        warning: why a GT the rollout names could not be used (a missing dataset or episode).
     """
 
     actions: npt.NDArray[np.float64] | None
@@ -49,6 +50,7 @@ class GroundTruth:
     carried: bool = False
     dataset_key: tuple | None = None
     files: list[Path] = field(default_factory=list)
+    warning: str | None = None
     _frames_in_clip: dict[str, int] = field(default_factory=dict, repr=False)
 
     @property
@@ -77,21 +79,23 @@ def resolve_ground_truth(rollout: Rollout, dataset_root: Path | None = None) -> 
 
     Carried joints win over the dataset's (they are what the evaluation compared against);
     carried video wins likewise. A dataset that is named but unreadable is an error; a missing
-    one simply leaves the rollout without dataset GT.
+    one, or one without the rollout's episode, leaves the rollout without dataset GT and says so
+    (``GroundTruth.warning``).
     """
     root = dataset_root
     if root is None and rollout.session is not None:
         root = rollout.session.dataset_root
-    episode, dataset_files = None, []
+    episode, dataset_files, warning = None, [], None
     if root is not None and rollout.episode_index is not None and (rollout.gt_actions is None or not rollout.gt_views):
+        from .episodes import dataset_name
         from .lerobot_dataset import open_dataset
 
         if Path(root).exists():
             ds = open_dataset(root)
             if rollout.episode_index not in ds.episode_indexes():
-                raise InspectorError(rollout.root / "rollout.json",
-                                     f"episode_index {rollout.episode_index} not in dataset {root} "
-                                     f"(episodes {ds.describe_episodes()})")
+                warning = (f"dataset {dataset_name(ds)} has no episode {rollout.episode_index} "
+                           f"(episodes {ds.describe_episodes()})")
+        if warning is None and Path(root).exists():
             episode = ds.episode(rollout.episode_index)
             info = ds.episode_info(rollout.episode_index)
             dataset_files = [ds.root / "meta" / "info.json", info.data_file, *(v.path for v in info.videos.values())]
@@ -112,12 +116,14 @@ def resolve_ground_truth(rollout: Rollout, dataset_root: Path | None = None) -> 
     else:
         actions, offset, source = None, 0, "none"
         if root is not None and not Path(root).exists():
-            source = f"none (dataset {root} not found)"  # named but gone: say so, don't hide it
+            warning = f"dataset {root} not found"  # named but gone: say so, don't hide it
+        if warning is not None:
+            source = f"none ({warning})"
         length = rollout.gt_episode_length
         length = None if length is None else length - rollout.start_frame
 
     gt = GroundTruth(actions=actions, offset=offset, episode_length=length, source=source,
-                     dataset_key=dataset_key, files=dataset_files)
+                     dataset_key=dataset_key, files=dataset_files, warning=warning)
     if rollout.gt_views:
         gt.views = list(rollout.gt_views)
         gt.clips = {v: rollout.video(v, gt=True) for v in gt.views}

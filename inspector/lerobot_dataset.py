@@ -140,7 +140,7 @@ def is_lerobot_dataset(path: str | Path) -> bool:
         return False
 
 
-_REPO_ID = re.compile(r"^[A-Za-z0-9][\w.-]*/[\w.-]+$")
+REPO_ID = re.compile(r"^[A-Za-z0-9][\w.-]*/[\w.-]+$")  # a Hugging Face repo id: org/name
 
 
 def lerobot_home_dirs() -> list[Path]:
@@ -164,10 +164,12 @@ def lerobot_home_dirs() -> list[Path]:
     return unique
 
 
-def find_dataset(path_or_repo_id: str | Path) -> Path:
-    """A dataset root from a directory or an ``org/name`` repo id. Never downloads.
+def find_dataset(path_or_repo_id: str | Path, download: bool = False) -> Path:
+    """A dataset root from a directory or an ``org/name`` repo id.
 
-    A repo id is looked up as ``<home>/<org>/<name>`` under :func:`lerobot_home_dirs`.
+    A repo id is looked up as ``<home>/<org>/<name>`` under :func:`lerobot_home_dirs`; with
+    ``download``, one found nowhere is fetched from the Hub into the first of them
+    (:func:`inspector.hub.fetch_dataset`: the ``hub`` extra, never when ``HF_HUB_OFFLINE`` is set).
 
     Raises:
         InspectorError: not a dataset, or not found locally (the message says how to get it).
@@ -178,12 +180,16 @@ def find_dataset(path_or_repo_id: str | Path) -> Path:
             raise InspectorError(path / INFO_PATH, "not a LeRobot dataset: meta/info.json is missing")
         return path
     text = str(path_or_repo_id)
-    if not _REPO_ID.match(text):
+    if not REPO_ID.match(text):
         raise InspectorError(path, "no such dataset directory (give a directory or an org/name repo id)")
     homes = lerobot_home_dirs()
     for home in homes:
         if is_lerobot_dataset(home / text):
             return home / text
+    if download:
+        from .hub import fetch_dataset
+
+        return fetch_dataset(text, homes[0] / text)
     where = ", ".join(str(h / text) for h in homes)
     if importlib.util.find_spec("lerobot") is not None:
         how = (f"download it with: python -c \"from lerobot.datasets.lerobot_dataset import "
@@ -191,8 +197,9 @@ def find_dataset(path_or_repo_id: str | Path) -> Path:
     else:
         major, minor = sys.version_info[:2]
         py = "" if (major, minor) >= (3, 12) else f"; this is Python {major}.{minor}"
-        how = (f"pass the dataset's directory, or download it: through LeRobot after pip install "
-               f"'inspector[lerobot]' (needs Python >= 3.12{py}), or with: huggingface-cli download "
+        how = (f"pass the dataset's directory, or download it: with pip install 'inspector[hub]' "
+               f"(then inspector fetches it), through LeRobot after pip install 'inspector[lerobot]' "
+               f"(needs Python >= 3.12{py}), or with: huggingface-cli download "
                f"{text} --repo-type dataset --local-dir {homes[0] / text}")
     raise InspectorError(text, f"dataset not found locally (looked in {where}); {how}")
 

@@ -14,7 +14,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .errors import InspectorError
-from .report_jobs import default_jobs, plan_tasks, run_tasks
+from .report_jobs import default_jobs, plan_episode_tasks, plan_tasks, run_tasks
 from .report_row import aggregate, prompt_divergence_record, prompt_pairs
 from .sources import open_sources
 from .units import DEFAULT_LIMIT_MARGIN_DEG, JOINT_NAMES
@@ -23,10 +23,12 @@ from .units import DEFAULT_LIMIT_MARGIN_DEG, JOINT_NAMES
 def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | None = None,
                  use_cache: bool = True, limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG,
                  cache_dir: str | None = None, progress: bool | None = None) -> dict[str, Any]:
-    """Metrics for every rollout under ``paths``; broken rollouts are listed under ``errors``.
+    """Metrics for every rollout under ``paths`` (and every episode of the LeRobot datasets among
+    them); what could not be read is listed under ``errors``.
 
     Args:
-        paths: sessions, rollout directories or DreamZero-SO101 output directories.
+        paths: sessions, rollout directories, DreamZero-SO101 output directories or LeRobot
+            datasets (a directory, or ``org/name`` in the local LeRobot cache).
         dataset: a LeRobot dataset with the GT episodes, for sessions that name none.
         jobs: worker processes (default: one per core; 1 computes in this process).
         use_cache: read and write the metrics cache.
@@ -34,19 +36,29 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
         cache_dir: the metrics cache directory (default: the user's cache directory).
         progress: a progress bar on stderr (default: when stderr is a terminal).
 
+    Returns:
+        ``{"rollouts", "aggregate", "prompt_divergence"?, "episodes"?, "warnings"?, "errors"?}``.
+
     Raises:
-        InspectorError: a path is unusable, or no rollout under ``paths`` could be reported (none
+        InspectorError: a path is unusable, or nothing under ``paths`` could be reported (none
             at all, or every one broken: the first one's error, counting the others).
     """
+    from .episodes import dataset_name, episode_tag
+
     jobs = default_jobs() if jobs is None else max(1, jobs)
-    sources = open_sources(paths, dataset=dataset, lazy=True)  # arrays are read by the workers
+    # arrays are read by the workers; datasets are reported episode by episode
+    sources = open_sources(paths, dataset=dataset, lazy=True, datasets=True)
     try:
         names = {str(s.root): s.name for s in sources.sessions}
+        names.update({str(d.root): dataset_name(d) for d in sources.datasets})
         failed = [err for s in sources.sessions for _, err in sorted(s.errors.items())]
         errors = {f"{s.name}/{tag}": str(err) for s in sources.sessions for tag, err in s.errors.items()}
         order = {(str(s.root), tag): i for i, (s, tag) in enumerate(
             (s, tag) for s in sources.sessions for tag in sorted(s.rollouts))}
-        tasks = plan_tasks(sources.sessions, jobs, limit_margin_deg, cache_dir, use_cache)
+        order.update({(str(d.root), episode_tag(e.index)): len(order) + i for i, (d, e) in enumerate(
+            (d, e) for d in sources.datasets for e in d.episodes)})
+        tasks = [*plan_tasks(sources.sessions, jobs, limit_margin_deg, cache_dir, use_cache),
+                 *plan_episode_tasks(sources.datasets, jobs, limit_margin_deg)]
         rows: dict[tuple[str, str], dict[str, Any]] = {}
         bar = _progress_bar(len(order), progress)
         n_cached = 0
@@ -63,20 +75,29 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
                 bar.update(len(outcomes))
         if bar is not None:
             bar.close()
-            print(f"inspector: {len(rows)} rollout(s) reported ({n_cached} from the metrics cache)"
+            print(f"inspector: {len(rows)} reported ({n_cached} from the metrics cache)"
                   + (f", {len(errors)} with errors" if errors else ""), file=sys.stderr)
         if not rows:
             if not failed:
-                where = ", ".join(str(s.root) for s in sources.sessions) or ", ".join(map(str, paths))
+                where = (", ".join([*(str(s.root) for s in sources.sessions), *(str(d.root) for d in sources.datasets)])
+                         or ", ".join(map(str, paths)))
                 raise InspectorError(where, "no rollouts to report")
             more = f" ({len(failed) - 1} more broken rollout(s))" if len(failed) > 1 else ""
             raise InspectorError(failed[0].file, failed[0].what + more)
         keys = sorted(rows, key=order.__getitem__)
-        ordered = [rows[k] for k in keys]
+        dataset_roots = {str(d.root) for d in sources.datasets}
+        session_keys = [k for k in keys if k[0] not in dataset_roots]
+        ordered = [rows[k] for k in session_keys]
         report: dict[str, Any] = {"rollouts": ordered, "aggregate": aggregate(ordered)}
-        divergences = _prompt_divergences(sources, keys, rows)
+        divergences = _prompt_divergences(sources, session_keys, rows)
         if divergences:
             report["prompt_divergence"] = divergences
+        episodes = [rows[k] for k in keys if k[0] in dataset_roots]
+        if episodes:
+            report["episodes"] = episodes
+        warnings = [f"{r['tag']}: {r['gt_warning']}" for r in ordered if r.get("gt_warning")]
+        if warnings:
+            report["warnings"] = warnings
         if errors:
             report["errors"] = errors
         return report
@@ -120,7 +141,7 @@ def _f(value: Any, fmt: str = ".2f") -> str:
 def format_report(report: dict[str, Any]) -> str:
     """Readable tables: single-chunk rollouts, autoregressive drift, aggregate, prompt pairs."""
     rows = report["rollouts"]
-    lines: list[str] = []
+    lines: list[str] = _episode_table(report.get("episodes", []))
     single = [r for r in rows if r["kind"] == "single_chunk"]
     auto = [r for r in rows if r["kind"] == "autoregressive"]
     views = sorted({v for r in rows for v in r["video_psnr_db"]})
@@ -159,7 +180,13 @@ def format_report(report: dict[str, Any]) -> str:
         if any(r["time_aligned_drift"] is None for r in auto):
             lines.append("  ('-': no GT joints; import with --dataset ROOT to measure drift)")
         lines.append("")
-    margin = rows[0]["limit_violations"]["margin_deg"] if rows else DEFAULT_LIMIT_MARGIN_DEG
+    for warning in report.get("warnings", []):
+        lines.append(f"warning: {warning}")
+    for tag, err in report.get("errors", {}).items():
+        lines.append(f"error: {err}")
+    if not rows:
+        return "\n".join(lines)
+    margin = rows[0]["limit_violations"]["margin_deg"]
     lines.append(f"lim.steps: steps with any joint more than {margin:g} deg past its URDF limit; "
                  f"PSNR [dB]: imagined vs GT frames of that camera")
     agg = report["aggregate"]
@@ -171,6 +198,26 @@ def format_report(report: dict[str, Any]) -> str:
         collapse = "never" if p["collapse_chunk"] is None else f"from chunk {p['collapse_chunk']}"
         lines.append(f"Prompt divergence {p['a']} vs {p['b']}: mean {p['mean']:.2f}, max {p['max']:.2f}; "
                      f"paths indistinguishable {collapse}")
-    for tag, err in report.get("errors", {}).items():
-        lines.append(f"error: {err}")
     return "\n".join(lines)
+
+
+def _episode_table(episodes: list[dict[str, Any]]) -> list[str]:
+    """Dataset episodes: how well the follower tracked its command, and limits (triage)."""
+    if not episodes:
+        return []
+    width = max(12, *(len(str(e["dataset"])) for e in episodes))
+    lines = ["Dataset episodes (tracking error = |commanded action - measured state|, L2 over 6 joints)",
+             f"{'dataset':<{width}} {'ep':>5} {'frames':>6} {'track mean':>10} {'max':>7} "
+             f"{'worst joint (RMSE)':>20} {'EE mm':>6} {'lim.steps meas/cmd':>18}  task"]
+    for e in episodes:
+        te = e["tracking_error"]
+        worst = "-"
+        if te["rmse"] is not None:
+            k = int(np.argmax(te["rmse"]))
+            worst = f"{JOINT_NAMES[k]} {te['rmse'][k]:.2f}"
+        lim = e["limit_violations"]
+        lines.append(f"{e['dataset']:<{width}} {e['episode_index']:>5} {e['length']:>6} {te['l2_mean']:>10.2f} "
+                     f"{te['l2_max']:>7.2f} {worst:>20} {e['ee_tracking_error_mm']['mean']:>6.1f} "
+                     f"{str(lim['measured']['steps']) + ' / ' + str(lim['commanded']['steps']):>18}  {e['task']}")
+    lines.append("")
+    return lines

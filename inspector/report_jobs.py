@@ -46,6 +46,31 @@ class Task:
 
 
 @dataclass(frozen=True)
+class EpisodeTask:
+    """Episodes of one LeRobot dataset for one worker (``report DATASET``: per-episode rows).
+
+    Attributes:
+        dataset_root: the dataset directory.
+        indexes: the episodes' indexes.
+        limit_margin_deg: joint-limit margin [deg].
+    """
+
+    dataset_root: str
+    indexes: tuple[int, ...]
+    limit_margin_deg: float
+
+    @property
+    def session_root(self) -> str:  # where outcomes say they come from
+        return self.dataset_root
+
+    @property
+    def tags(self) -> tuple[str, ...]:
+        from .episodes import episode_tag
+
+        return tuple(episode_tag(i) for i in self.indexes)
+
+
+@dataclass(frozen=True)
 class Outcome:
     """One rollout's result: its row, or the one-line error that kept it from one."""
 
@@ -76,7 +101,7 @@ def plan_tasks(sessions: Sequence[Any], jobs: int, limit_margin_deg: float, cach
     n_rollouts = sum(len(tags) for tags in groups.values())
     # two tasks per worker: larger tasks share more GT decoding, and the last ones still balance
     per_task = max(1, min(MAX_TASK_ROLLOUTS, math.ceil(n_rollouts / (2 * max(1, jobs)))))
-    tasks = []
+    tasks: list[Task | EpisodeTask] = []
     by_root = {str(s.root): s for s in sessions}
     for (root, _), tags in groups.items():
         override = by_root[root].gt_source.get("dataset")
@@ -85,7 +110,18 @@ def plan_tasks(sessions: Sequence[Any], jobs: int, limit_margin_deg: float, cach
     return tasks
 
 
-def run_tasks(tasks: Sequence[Task], jobs: int) -> Iterator[list[Outcome]]:
+def plan_episode_tasks(datasets: Sequence[Any], jobs: int, limit_margin_deg: float) -> list[EpisodeTask]:
+    """Tasks for every episode of ``datasets`` (:class:`inspector.lerobot_dataset.LeRobotDataset`)."""
+    tasks = []
+    for ds in datasets:
+        indexes = [e.index for e in ds.episodes]
+        per_task = max(1, min(4 * MAX_TASK_ROLLOUTS, math.ceil(len(indexes) / (2 * max(1, jobs)))))
+        for i in range(0, len(indexes), per_task):
+            tasks.append(EpisodeTask(str(ds.root), tuple(indexes[i:i + per_task]), limit_margin_deg))
+    return tasks
+
+
+def run_tasks(tasks: Sequence[Task | EpisodeTask], jobs: int) -> Iterator[list[Outcome]]:
     """Each task's outcomes as it finishes: here when ``jobs`` <= 1, else in worker processes."""
     if jobs <= 1 or len(tasks) <= 1:
         for task in tasks:
@@ -129,8 +165,10 @@ def default_jobs() -> int:
 # In a worker
 
 
-def run_task(task: Task) -> list[Outcome]:
-    """Rows of a task's rollouts (from the cache where it has them)."""
+def run_task(task: Task | EpisodeTask) -> list[Outcome]:
+    """Rows of a task's rollouts (from the cache where it has them), or of its episodes."""
+    if isinstance(task, EpisodeTask):
+        return _run_episode_task(task)
     from .cache import MetricsCache, rollout_key
     from .ground_truth import resolve_ground_truth
     from .session import ROLLOUTS_DIR, load_rollout, read_session
@@ -160,6 +198,27 @@ def run_task(task: Task) -> list[Outcome]:
             outcomes.append(Outcome(task.session_root, tag, error_file=exc.file, error=exc.what))
     for batch in _batches(todo):
         outcomes += _compute(batch, task, cache)
+    return outcomes
+
+
+def _run_episode_task(task: EpisodeTask) -> list[Outcome]:
+    """Per-episode rows (tracking error, limits, ranges) of a dataset's episodes."""
+    from .episodes import episode_rollout, episode_summary, episode_tag
+    from .lerobot_dataset import open_dataset
+    from .timeline import build_timeline
+
+    outcomes = []
+    try:
+        ds = open_dataset(task.dataset_root)
+    except InspectorError as exc:
+        return [Outcome(task.dataset_root, tag, error_file=exc.file, error=exc.what) for tag in task.tags]
+    for index in task.indexes:
+        try:
+            rollout, gt = episode_rollout(ds, index)
+            row = episode_summary(build_timeline(rollout, gt=gt, limit_margin_deg=task.limit_margin_deg))
+            outcomes.append(Outcome(task.dataset_root, episode_tag(index), row=row))
+        except InspectorError as exc:
+            outcomes.append(Outcome(task.dataset_root, episode_tag(index), error_file=exc.file, error=exc.what))
     return outcomes
 
 

@@ -84,6 +84,7 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> d
         "video_psnr_db": psnr,
         "post_episode_chunks": post_chunks,
         "gt_source": tl.gt.source,
+        "gt_warning": tl.gt.warning,
     }
 
 

@@ -53,7 +53,9 @@ STATES_FILE = "states.npy"
 VIDEO_DIR = "video"
 GT_DIR = "gt"
 
-RolloutKind = Literal["single_chunk", "autoregressive"]
+# "episode": a LeRobot episode shown like a rollout (commanded vs measured arm), made in memory
+# (inspector.episodes); sessions on disk hold the other two.
+RolloutKind = Literal["single_chunk", "autoregressive", "episode"]
 KINDS: tuple[str, ...] = ("single_chunk", "autoregressive")
 _TAG = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,127}$")
 _VIEW = _TAG
@@ -98,7 +100,7 @@ class Rollout:
     gt_episode_length: int | None = None
     extra: dict[str, Any] = field(default_factory=dict)  # importer provenance, reference metrics
     session: "Session | None" = None
-    _arrays: dict[str, "NpyFile"] = field(default_factory=dict, repr=False)
+    _arrays: dict[str, "NpyFile | ArrayValue"] = field(default_factory=dict, repr=False)
 
     @property
     def actions(self) -> npt.NDArray[np.float64]:
@@ -130,8 +132,9 @@ class Rollout:
     @property
     def steps_per_chunk(self) -> int:
         """Timeline steps each chunk covers: an autoregressive rollout executes the first
-        ``executed_per_chunk`` actions of each chunk; a single chunk is judged on its whole horizon."""
-        return self.horizon if self.kind == "single_chunk" else self.executed_per_chunk
+        ``executed_per_chunk`` actions of each chunk; a single chunk (or an episode, one chunk of
+        all its frames) is judged on its whole horizon."""
+        return self.executed_per_chunk if self.kind == "autoregressive" else self.horizon
 
     def executed_actions(self) -> npt.NDArray[np.float64]:
         """(n_steps, 6) the actions that run, chained chunk after chunk (see :attr:`steps_per_chunk`)."""
@@ -368,6 +371,20 @@ def load_rollout(root: str | Path, units: Units | None = None, lazy: bool = Fals
         actions_shape=arrays["actions"].shape, gt_views=list(gt_views), gt_episode_length=gt_len,
         extra=extra, _arrays=arrays,
     )
+
+
+class ArrayValue:
+    """An array held in memory, read like an :class:`NpyFile` (for rollouts made in memory)."""
+
+    def __init__(self, values: npt.ArrayLike) -> None:
+        self._values = np.asarray(values, np.float64)
+        self.shape: tuple[int, ...] = tuple(self._values.shape)
+
+    def load(self) -> npt.NDArray[np.float64]:
+        return self._values
+
+    def release(self) -> None:
+        pass  # nothing to read again
 
 
 class NpyFile:

@@ -25,10 +25,12 @@ BUNDLED_DEMO = Path(__file__).resolve().parent.parent / "sessions" / "demo"
 
 @dataclass
 class Sources:
-    """Sessions opened from user paths. ``roots`` are the directories the app may read under."""
+    """Sessions (and LeRobot datasets) opened from user paths. ``roots`` are the directories the
+    app may read under."""
 
     sessions: list[Session] = field(default_factory=list)
     roots: list[Path] = field(default_factory=list)
+    datasets: list = field(default_factory=list)  # LeRobotDataset, their episodes browsed on their own
     _temps: list[tempfile.TemporaryDirectory] = field(default_factory=list, repr=False)
 
     def rollouts(self) -> Iterator[tuple[Session, Rollout]]:
@@ -47,7 +49,7 @@ class Sources:
 
 
 def open_sources(paths: Sequence[str | Path], dataset: str | Path | None = None,
-                 confine: bool = False, lazy: bool = False) -> Sources:
+                 confine: bool = False, lazy: bool = False, datasets: bool = False) -> Sources:
     """Open each path as a session (a rollout path opens its session filtered to that rollout).
 
     A session named more than once (itself, or several of its rollouts) is opened once, holding
@@ -59,6 +61,8 @@ def open_sources(paths: Sequence[str | Path], dataset: str | Path | None = None,
         confine: refuse (as rollout errors, before reading them) rollouts whose directory or any
             file in it resolves outside the session directory; the app serves with this on.
         lazy: read rollouts' arrays on first use (``open_session(..., lazy=True)``).
+        datasets: also take LeRobot datasets (a directory, or ``org/name`` in the local LeRobot
+            cache) into ``Sources.datasets`` (only their metadata is read).
 
     Raises:
         InspectorError: a path is missing or is none of the above (or, confined, its
@@ -67,6 +71,8 @@ def open_sources(paths: Sequence[str | Path], dataset: str | Path | None = None,
     out = Sources()
     try:
         for raw in paths:
+            if datasets and _open_dataset(out, raw, confine):
+                continue
             _open_one(out, raw, dataset, confine, lazy)
     except BaseException:
         out.close()  # temporary sessions of the paths already opened
@@ -104,7 +110,7 @@ def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine
     if dataset is not None and session.dataset_root is None:
         from .lerobot_dataset import find_dataset
 
-        session.gt_source["dataset"] = str(find_dataset(dataset))
+        session.gt_source["dataset"] = str(find_dataset(dataset, download=True))
     same = next((s for s in out.sessions if s.root.resolve() == session.root.resolve()), None)
     if same is not None:  # named twice (or two of its rollouts named): one session, their union
         same.rollouts.update(session.rollouts)
@@ -112,6 +118,32 @@ def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine
         return
     out.sessions.append(session)
     out.roots.append(session.root.resolve())
+
+
+def _open_dataset(out: Sources, raw: str | Path, confine: bool) -> bool:
+    """Open ``raw`` into ``out.datasets`` when it names a LeRobot dataset; False when it does not."""
+    from .lerobot_dataset import INFO_PATH, REPO_ID, find_dataset, is_lerobot_dataset, open_dataset
+
+    path = Path(os.path.expanduser(raw))
+    if path.exists():
+        if not (is_lerobot_dataset(path) or ((path / INFO_PATH).is_file() and not is_session(path))):
+            return False
+        root = path.resolve()
+    elif REPO_ID.match(str(raw)):
+        try:
+            root = find_dataset(str(raw), download=True).resolve()
+        except InspectorError as exc:  # neither a path nor a dataset here: say how to get one
+            raise InspectorError(path, f"not found: no such path, and {exc.what}") from None
+    else:
+        return False
+    if confine:
+        check_confined(root / INFO_PATH, [root])
+    ds = open_dataset(root)
+    ds.episodes  # the index: read now, so a broken one is refused now
+    if all(d.root != ds.root for d in out.datasets):
+        out.datasets.append(ds)
+        out.roots.append(root)
+    return True
 
 
 def check_confined(path: str | Path, roots: Iterable[str | Path]) -> None:

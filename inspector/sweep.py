@@ -39,6 +39,7 @@ class SweepMetrics:
         time_aligned_drift, best_match_drift, dtw_drift: (B, T).
         best_match_index: (B, T) GT frame each step matches.
         tempo: (B,) NaN where fewer than two steps lie inside the episode.
+        (best-match, tempo, the split and DTW are None without ``alignments``.)
         speed_mismatch, path_error: (B, T) time-aligned drift split (see ``metrics.drift_split``).
         dtw_cost: (B,).
         ee_gt: (T, 3) [m]; ee_error_mm: (B, T) tool-point distance to the time-aligned GT [mm].
@@ -79,7 +80,7 @@ class SweepMetrics:
 
 def sweep_metrics(chunks: npt.ArrayLike, gt: npt.ArrayLike | None, units: Units = Units(),
                   executed_per_chunk: int = 9, offset: int = 0,
-                  limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG) -> SweepMetrics:
+                  limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG, alignments: bool = True) -> SweepMetrics:
     """Every joint-space metric for B rollouts of the same episode.
 
     Args:
@@ -89,6 +90,8 @@ def sweep_metrics(chunks: npt.ArrayLike, gt: npt.ArrayLike | None, units: Units 
         executed_per_chunk: timeline steps each chunk covers (the horizon for single chunks).
         offset: GT index of rollout step 0.
         limit_margin_deg: tolerance past a joint limit before it counts as a violation [deg].
+        alignments: also align the paths (best-match, tempo, speed/path split, DTW); an episode's
+            commanded vs measured arm runs on one clock, so its tracking error needs none.
     """
     c = np.asarray(chunks, np.float64)
     B, N, H, J = c.shape
@@ -106,13 +109,14 @@ def sweep_metrics(chunks: npt.ArrayLike, gt: npt.ArrayLike | None, units: Units 
         return out
     gt = np.asarray(gt, np.float64)
     ta, gt_aligned, post = metrics.time_aligned(pred, gt, offset)
-    bm, bm_index = metrics.best_match(pred, gt)
-    out.gt_aligned, out.post_episode = gt_aligned, post
-    out.time_aligned_drift, out.best_match_drift, out.best_match_index = ta, bm, bm_index
-    out.tempo = np.asarray(metrics.tempo(bm_index, ~post), np.float64) if (~post).sum() >= 2 else np.full(B, np.nan)
-    out.speed_mismatch, out.path_error = metrics.drift_split(ta, bm)
-    out.dtw_drift, dtw_cost = metrics.dtw(pred, gt[offset:])
-    out.dtw_cost = np.asarray(dtw_cost, np.float64)
+    out.gt_aligned, out.post_episode, out.time_aligned_drift = gt_aligned, post, ta
+    if alignments:
+        bm, bm_index = metrics.best_match(pred, gt)
+        out.best_match_drift, out.best_match_index = bm, bm_index
+        out.tempo = np.asarray(metrics.tempo(bm_index, ~post), np.float64) if (~post).sum() >= 2 else np.full(B, np.nan)
+        out.speed_mismatch, out.path_error = metrics.drift_split(ta, bm)
+        out.dtw_drift, dtw_cost = metrics.dtw(pred, gt[offset:])
+        out.dtw_cost = np.asarray(dtw_cost, np.float64)
     out.ee_gt = kinematics().gripper_positions(gt_aligned, units)
     out.ee_error_mm = np.linalg.norm(out.ee_pred - out.ee_gt[None], axis=-1) * 1000.0
 

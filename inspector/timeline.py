@@ -30,6 +30,25 @@ from .video_metrics import VideoMetrics, compare_clips
 Array = npt.NDArray[np.float64]
 
 
+@dataclass(frozen=True)
+class ArmLabels:
+    """What a timeline's two arms are, in words for plots, cards and recordings.
+
+    Attributes:
+        pred: the arm in ``pred`` ("predicted" for a rollout, "commanded" for an episode).
+        gt: the arm in ``gt_aligned`` ("GT" / "measured").
+        drift: the time-aligned distance between them ("time-aligned drift" / "tracking error").
+    """
+
+    pred: str
+    gt: str
+    drift: str
+
+
+ROLLOUT_LABELS = ArmLabels("predicted", "GT", "time-aligned drift")
+EPISODE_LABELS = ArmLabels("commanded (action)", "measured (state)", "tracking error")
+
+
 @dataclass
 class RolloutTimeline:
     """Everything the app and the exporter draw for one rollout. Joint values in ``units``.
@@ -92,6 +111,10 @@ class RolloutTimeline:
     @property
     def has_gt_joints(self) -> bool:
         return self.gt_aligned is not None
+
+    @property
+    def labels(self) -> ArmLabels:
+        return EPISODE_LABELS if self.kind == "episode" else ROLLOUT_LABELS
 
     def step_of(self, chunk: int, step_in_chunk: int) -> int:
         """Global step of ``step_in_chunk`` in ``chunk`` (clamped to the timeline)."""
@@ -221,8 +244,8 @@ def build_timelines(rollouts: Sequence[Rollout], gt: GroundTruth,
     one batch. Each rollout's numbers are the same as when it is computed alone."""
     first = rollouts[0]
     chunks = np.stack([r.actions for r in rollouts])
-    offset = gt.offset
-    m = sweep_metrics(chunks, gt.actions, first.units, first.steps_per_chunk, offset, limit_margin_deg)
+    m = sweep_metrics(chunks, gt.actions, first.units, first.steps_per_chunk, gt.offset, limit_margin_deg,
+                      alignments=first.kind != "episode")
     return [_timeline(r, gt, m, b, limit_margin_deg) for b, r in enumerate(rollouts)]
 
 
@@ -250,12 +273,13 @@ def _timeline(rollout: Rollout, gt: GroundTruth, m: SweepMetrics, b: int, margin
     if m.gt_aligned is None:
         return tl
     tl.gt_aligned, tl.post_episode = m.gt_aligned, m.post_episode
-    tl.time_aligned_drift, tl.best_match_drift = m.time_aligned_drift[b], m.best_match_drift[b]
-    tl.best_match_index = m.best_match_index[b]
-    tempo = float(m.tempo[b])
-    tl.tempo = tempo if np.isfinite(tempo) else None
-    tl.speed_mismatch, tl.path_error = m.speed_mismatch[b], m.path_error[b]
-    tl.dtw_drift, tl.dtw_cost = m.dtw_drift[b], float(m.dtw_cost[b])
+    tl.time_aligned_drift = m.time_aligned_drift[b]
+    if m.best_match_drift is not None:
+        tl.best_match_drift, tl.best_match_index = m.best_match_drift[b], m.best_match_index[b]
+        tempo = float(m.tempo[b])
+        tl.tempo = tempo if np.isfinite(tempo) else None
+        tl.speed_mismatch, tl.path_error = m.speed_mismatch[b], m.path_error[b]
+        tl.dtw_drift, tl.dtw_cost = m.dtw_drift[b], float(m.dtw_cost[b])
     tl.joint_error = pred - m.gt_aligned
     tl.ee_gt, tl.ee_error_mm = m.ee_gt, m.ee_error_mm[b]
     tl.chunk_rmse = m.chunk_rmse[b]
@@ -264,4 +288,5 @@ def _timeline(rollout: Rollout, gt: GroundTruth, m: SweepMetrics, b: int, margin
     return tl
 
 
-__all__ = ["RolloutTimeline", "VideoMetrics", "build_timeline", "build_timelines", "batch_key", "JOINT_NAMES"]
+__all__ = ["ArmLabels", "RolloutTimeline", "VideoMetrics", "build_timeline", "build_timelines", "batch_key",
+           "JOINT_NAMES"]

@@ -279,6 +279,14 @@ def _rows(tags: list[str]) -> Callable[[Run], None]:
     return check
 
 
+def _warned_rows(tags: list[str], warning: str) -> Callable[[Run], None]:
+    def check(run: Run) -> None:
+        report = run.json()
+        assert sorted(r["tag"] for r in report["rollouts"]) == sorted(tags)
+        assert [w for w in report["warnings"] if w.startswith(warning)], report["warnings"]
+    return check
+
+
 def _ok_report_rows(tags: list[str], key_suffix: str, file: str, field: str) -> Callable[[Run], None]:
     def check(run: Run) -> None:
         _rows(tags)(run)
@@ -618,9 +626,10 @@ CASES: list[Case] = [
     # a session named twice is one session: its rollouts are reported once
     Case("report-same-session-twice", _same_session_twice, rc=0, check=_rows(["f084"])),
     # ---------------------------------------------------------------- report: GT from a dataset
+    # an episode the dataset lacks: the rollout is still reported (no GT), and a warning says why
     Case("report-dataset-episode-beyond",
          _ds_cmd("report", lambda ws, d, s: edit_json(s / "rollouts/r1/rollout.json", episode_index=7), "--json"), rc=0,
-         check=_ok_report_rows(["r0"], "/r1", "r1/rollout.json", "episode_index 7 not in dataset")),
+         check=_warned_rows(["r0", "r1"], "r1: dataset so101_v30 has no episode 7")),
     Case("report-dataset-start-frame-beyond",
          _ds_cmd("report", lambda ws, d, s: edit_json(s / "rollouts/r0/rollout.json", start_frame=500), "--json"), rc=0,
          check=_ok_report_rows(["r1"], "/r0", "r0/rollout.json", "start_frame 500 lies beyond episode 0 (150 frames)")),

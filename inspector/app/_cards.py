@@ -27,6 +27,9 @@ SCENE_LEGEND = " · ".join(_SWATCH.format(c, t) for c, t in (
 SCENE_LEGEND_NO_GT = " · ".join(_SWATCH.format(c, t) for c, t in (
     ("#f76707", "predicted arm (no GT arm)"), ("#c92a2a", "chunk's executed steps"),
     ("#fab005", "rest of its horizon")))
+SCENE_LEGEND_EPISODE = " · ".join(_SWATCH.format(c, t) for c, t in (
+    ("#9ea3ad", "measured arm (observation.state)"), ("#f76707", "commanded arm (action)"),
+    ("#2b8a3e", "measured path")))
 
 
 def esc(value: object) -> str:
@@ -52,6 +55,8 @@ def headline_metrics(tl: RolloutTimeline, psnr: dict[str, np.ndarray | None] | N
     """
     u = unit(tl)
     rows: list[tuple[str, str]] = []
+    if tl.kind == "episode":
+        return episode_metrics(tl)
     if tl.has_gt_joints:
         inside = ~tl.post_episode if tl.post_episode is not None else np.ones(tl.n_steps, bool)
         ta = tl.time_aligned_drift
@@ -94,9 +99,37 @@ def headline_metrics(tl: RolloutTimeline, psnr: dict[str, np.ndarray | None] | N
     return rows
 
 
+def episode_metrics(tl: RolloutTimeline) -> list[tuple[str, str]]:
+    """(name, value) rows summarising a dataset episode: how well the follower tracked its command."""
+    from ..units import JOINT_NAMES
+
+    u = unit(tl)
+    err = tl.time_aligned_drift
+    rows = [("tracking error |commanded − measured|", f"mean {_fmt(err.mean(), u)} · max {_fmt(err.max(), u)}")]
+    if tl.chunk_errors is not None:
+        per_joint = tl.chunk_errors.per_joint_rmse
+        worst = int(np.argmax(per_joint))
+        rows.append(("worst-tracked joint (RMSE)", f"{JOINT_NAMES[worst]} {_fmt(per_joint[worst], u, 2)}"))
+    if tl.ee_error_mm is not None:
+        rows.append(("end-effector tracking error", f"mean {_fmt(tl.ee_error_mm.mean(), ' mm', 1)} · "
+                                                     f"max {_fmt(tl.ee_error_mm.max(), ' mm', 1)}"))
+    from .. import metrics
+
+    margin = f"(+{tl.limit_margin_deg:g}° margin)"
+    measured_excess = metrics.limit_excess(tl.gt_aligned, tl.limits)
+    for name, flags in (("commanded", tl.limit_violation), ("measured", measured_excess > tl.limit_margin)):
+        steps = int(flags.any(axis=1).sum())
+        joints = ", ".join(j for j, v in zip(JOINT_NAMES, flags.any(axis=0)) if v)
+        rows.append((f"{name} steps past a joint limit {margin}",
+                     f"{steps} of {tl.n_steps} ({joints})" if steps else "none"))
+    return rows
+
+
 def rollout_card(tl: RolloutTimeline, metrics: Sequence[tuple[str, str]], gt_note: str) -> str:
     """Prompt, model, kind, units, GT source and headline metrics of the open rollout."""
     r = tl.rollout
+    if r.kind == "episode":
+        return episode_card(tl, metrics)
     session = r.session
     model = session.model if session is not None else {}
     model_text = " · ".join(str(model[k]) for k in ("name", "checkpoint") if model.get(k)) or "—"
@@ -112,9 +145,27 @@ def rollout_card(tl: RolloutTimeline, metrics: Sequence[tuple[str, str]], gt_not
     ]
     rows.append(("3D scene", SCENE_LEGEND if tl.has_gt_joints else SCENE_LEGEND_NO_GT))
     rows += [(esc(k), esc(v)) for k, v in metrics]
+    return _card_table(r.tag, rows)
+
+
+def episode_card(tl: RolloutTimeline, metrics: Sequence[tuple[str, str]]) -> str:
+    """Task, dataset, length, units and tracking metrics of an open dataset episode."""
+    r = tl.rollout
+    rows = [
+        ("task", f"<b>{esc(r.prompt or '—')}</b>"),
+        ("dataset", esc(f"{r.extra.get('dataset_name', '')} · episode {r.episode_index}")),
+        ("length", esc(f"{tl.n_steps} frames · {tl.n_steps / tl.fps:.1f} s at {tl.fps:g} fps")),
+        ("units", esc(tl.units.label() + (f" ({r.extra['units_reason']})" if r.extra.get("units_reason") else ""))),
+        ("3D scene", SCENE_LEGEND_EPISODE),
+        *[(esc(k), esc(v)) for k, v in metrics],
+    ]
+    return _card_table(r.tag, rows)
+
+
+def _card_table(tag: str, rows: Sequence[tuple[str, str]]) -> str:
     body = "".join(f"<tr><td style='{TD};{MUTED};white-space:nowrap'>{k}</td><td style='{TD}'>{v}</td></tr>"
                    for k, v in rows)
-    return (f"<div class='inspector-card' data-rollout='{esc(r.tag)}' style='{CARD}'>"
+    return (f"<div class='inspector-card' data-rollout='{esc(tag)}' style='{CARD}'>"
             f"<table style='{TABLE}'>{body}</table></div>")
 
 
@@ -137,13 +188,22 @@ def error_card(title: str, error: BaseException) -> str:
 def video_grid(pairs: Sequence[FramePair], step: int, t_s: float) -> str:
     """One column per view: the imagined frame above the GT frame at the same time, with their PSNR."""
     if not pairs:
-        return f"<div style='{CARD};{MUTED}'>This rollout has no imagined video.</div>"
+        return f"<div style='{CARD};{MUTED}'>No video for this rollout.</div>"
     img = "width:100%;display:block;border-radius:3px;background:#222"
     box = ("width:100%;aspect-ratio:320/176;display:flex;align-items:center;justify-content:center;"
            "background:#e9ecef;color:#6b7280;font-size:0.7rem;border-radius:3px;text-align:center")
     cap = "font-size:0.66rem;text-align:center;margin-bottom:3px"
     cols = []
     for p in pairs:
+        if not p.has_imagined:  # a camera with real frames only (a dataset episode's cameras)
+            frame = (f"<img class='inspector-frame' data-view='{esc(p.view)}' data-kind='gt' "
+                     f"data-step='{step}' src='{p.gt}' style='{img}'>" if p.gt is not None
+                     else f"<div style='{box}'>loading…</div>" if p.status == LOADING
+                     else f"<div style='{box}'>{esc(p.gt_note or p.status)}</div>")
+            index = f" · frame {p.gt_index}" if p.gt_index is not None else ""
+            cols.append(f"<div style='min-width:0'><div style='font-size:0.72rem'><b>{esc(p.view)}</b></div>"
+                        f"{frame}<div style='{cap};color:#2b8a3e'>camera{index}</div></div>")
+            continue
         psnr = f"PSNR {p.psnr_db:.1f} dB" if p.psnr_db is not None else "PSNR —"
         if p.status == LOADING:
             top = bottom = f"<div style='{box}'>loading…</div>"

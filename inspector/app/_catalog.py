@@ -21,6 +21,7 @@ from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..episodes import EpisodeRef, dataset_name, episode_refs, episode_rollout
 from ..errors import InspectorError
 from ..session import Rollout, Session
 from ..sources import Sources, check_confined
@@ -34,16 +35,26 @@ KEEP_LOADED = 16
 
 @dataclass(frozen=True)
 class Entry:
-    """One rollout of one served session (it may have failed to load: ``error``)."""
+    """One rollout of one served session (it may have failed to load: ``error``), or one episode
+    of a served dataset (``episode``).
+    """
 
-    key: str  # unique label shown in the picker: "<session> / <tag>"
-    session: Session
+    key: str  # unique label shown in the picker: "<session> / <tag>", "<dataset> / episode <i> ..."
+    session: Session | None
     tag: str
     error: InspectorError | None = None
+    episode: EpisodeRef | None = None
 
     @property
     def rollout(self) -> Rollout | None:
-        return self.session.rollouts.get(self.tag)
+        return self.session.rollouts.get(self.tag) if self.session is not None else None
+
+    @property
+    def kind(self) -> str:
+        if self.episode is not None:
+            return "episode"
+        r = self.rollout
+        return r.kind if r is not None else "unreadable"
 
 
 @dataclass
@@ -73,13 +84,16 @@ class Catalog:
         self.frame_cache = frame_cache if frame_cache is not None else FrameCache()
         self.metrics_cache = metrics_cache
         self.entries: dict[str, Entry] = {}
-        names = [s.name for s in sources.sessions]
-        for i, session in enumerate(sources.sessions):
-            # Two sessions may share a name: the label then carries its directory too.
-            name = session.name if names.count(session.name) == 1 else f"{session.name} ({session.root.name}#{i})"
+        names = _unique_names([(s.name, s.root) for s in sources.sessions]
+                              + [(dataset_name(d), d.root) for d in sources.datasets])
+        for session, name in zip(sources.sessions, names):
             for tag in session.tags():
                 key = f"{name} / {tag}"
                 self.entries[key] = Entry(key, session, tag, session.errors.get(tag))
+        for ds, name in zip(sources.datasets, names[len(sources.sessions):]):
+            for ref in episode_refs(ds):
+                key = f"{name} / episode {ref.index} · {ref.length} frames ({ref.duration_s:.1f} s) · {ref.task}"
+                self.entries[key] = Entry(key, None, ref.tag, episode=ref)
         self._lock = threading.Lock()
         self._build_locks: dict[str, threading.Lock] = {}
         self._loaded: OrderedDict[str, Loaded] = OrderedDict()
@@ -88,10 +102,8 @@ class Catalog:
         return list(self.entries)
 
     def default_key(self) -> str | None:
-        """The first rollout that loaded (autoregressive first: the richest view), else any."""
-        good = [e for e in self.entries.values() if e.error is None]
-        good.sort(key=lambda e: e.rollout.kind != "autoregressive")  # stable: keeps name order
-        return good[0].key if good else next(iter(self.entries), None)
+        """The first entry in the picker's order that loaded, else the first one."""
+        return next((e.key for e in self.entries.values() if e.error is None), next(iter(self.entries), None))
 
     def get(self, key: str) -> Entry | None:
         return self.entries.get(key)
@@ -130,8 +142,10 @@ class Catalog:
             return len(self._loaded)
 
     def _build(self, entry: Entry) -> Loaded:
+        if entry.episode is not None:
+            return self._build_episode(entry)
         rollout = entry.rollout
-        assert rollout is not None
+        assert rollout is not None and entry.session is not None
         try:
             # Refused at start-up already when served; checked again in case a link appeared since.
             check_confined(rollout.root, [entry.session.root])
@@ -144,6 +158,20 @@ class Catalog:
             what = f"cannot build the timeline ({type(exc).__name__}: {exc})"
             raise InspectorError(Path(rollout.root), what) from exc
         return Loaded(entry, tl, scene, FrameStore(tl, self._executor, self.frame_cache, remember))
+
+    def _build_episode(self, entry: Entry) -> Loaded:
+        ref = entry.episode
+        assert ref is not None
+        try:
+            rollout, gt = episode_rollout(ref.dataset, ref.index)
+            tl = build_timeline(rollout, gt=gt)
+            scene = RolloutScene.from_timeline(tl, self._joint_links)
+        except InspectorError:
+            raise
+        except Exception as exc:
+            raise InspectorError(ref.dataset.root, f"cannot read episode {ref.index} "
+                                                   f"({type(exc).__name__}: {exc})") from exc
+        return Loaded(entry, tl, scene, FrameStore(tl, self._executor, self.frame_cache))
 
     def _video_metrics_cache(self, tl: RolloutTimeline):
         """Put the metrics cache's video metrics into ``tl``; returns what stores new ones there."""
@@ -167,3 +195,17 @@ class Catalog:
                 cache.put(key, {"row": current.get("row"), "video": video})
 
         return remember
+
+
+def _unique_names(named: list[tuple[str, Path]]) -> list[str]:
+    """Picker names of served sessions and datasets: their own name, or their directory where
+    two share a name, or the directory with its parent where those clash too."""
+    names = [n for n, _ in named]
+    out = []
+    for name, root in named:
+        if names.count(name) == 1:
+            out.append(name)
+            continue
+        dirs = [r.name for n, r in named if n == name]
+        out.append(f"{name} ({root.name})" if dirs.count(root.name) == 1 else f"{name} ({root.parent.name}/{root.name})")
+    return out

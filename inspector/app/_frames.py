@@ -102,6 +102,8 @@ class FramePair:
             the real episode's end; ``gt_note`` says which).
         gt_note: why there is no GT frame, or "".
         psnr_db: PSNR of this pair [dB], or None (not computed yet or no GT frame).
+        has_imagined: False for a view with GT frames only (a dataset camera).
+        gt_index: the GT frame shown, for a view with GT frames only.
     """
 
     view: str
@@ -111,10 +113,15 @@ class FramePair:
     gt: str | None = None
     gt_note: str = ""
     psnr_db: float | None = None
+    has_imagined: bool = True
+    gt_index: int | None = None
 
 
 class FrameStore:
     """Frames of one rollout's views, shared by every tab that shows the rollout.
+
+    A view has an imagined clip, a GT clip, or both; a dataset episode's cameras (and a dataset
+    camera the model does not imagine) have only GT frames.
 
     Args:
         timeline: the rollout's shared timeline.
@@ -127,8 +134,10 @@ class FrameStore:
     def __init__(self, timeline: RolloutTimeline, executor: Executor, cache: FrameCache,
                  on_video_metrics: Callable[[Any], None] | None = None) -> None:
         self.timeline = timeline
-        self.views: list[str] = list(timeline.rollout.views)
-        self.status: dict[str, str] = {v: LOADING for v in self.views}  # imagined clips
+        imagined = list(timeline.rollout.views)
+        self.views: list[str] = imagined + [v for v in timeline.gt.views if v not in imagined]
+        self.imagined_views = set(imagined)
+        self.status: dict[str, str] = {v: LOADING for v in self.views}  # the view's frames
         self.gt_status: dict[str, str] = {v: (LOADING if v in timeline.gt.clips else "no GT video for this view")
                                           for v in self.views}
         known = timeline.known_video_metrics()
@@ -141,10 +150,14 @@ class FrameStore:
         self._listeners: list[Callable[[], None]] = []
         self._filling: set[str] = set()
         self._framed: set[str] = set()  # views whose frames are all in the cache
-        self._finished: set[str] = set()  # ... and whose PSNR is known (or failed)
+        self._finished: set[str] = set()  # ... and whose PSNR is known (or failed, or has none)
         self._sizes: dict[str, tuple[int, int]] = {}
         self.decoded = threading.Event()  # every view's frames are in the cache: ready to scrub
         self.done = threading.Event()  # ... and every view's PSNR is known (or failed)
+
+    def _compared(self, view: str) -> bool:
+        """The view has both imagined and GT frames: its fill computes PSNR."""
+        return view in self.imagined_views and view in self.timeline.gt.clips
 
     # -- background work ----------------------------------------------------------------------
     def start(self) -> None:
@@ -157,7 +170,7 @@ class FrameStore:
                 if view in self.timeline.gt.clips:
                     self.gt_status[view] = READY
                 self._view_framed(view)
-                if self.psnr.get(view) is not None or view not in self.timeline.gt.clips:
+                if self.psnr.get(view) is not None or not self._compared(view):
                     self._view_finished(view)
                     continue
             self._fill(view)
@@ -166,18 +179,20 @@ class FrameStore:
             self.done.set()
 
     def _frames_cached(self, view: str) -> bool:
-        """The view's first and last imagined frames and first GT frame are in the cache (the
-        least recently used go first, so the rest are too, or come back on a miss)."""
+        """The view's first and last frames are in the cache (the least recently used go first,
+        so the rest are too, or come back on a miss)."""
         tl = self.timeline
         try:
-            n = len(tl.rollout.video(view))
             size = self.display_size(view)
+            imagined_key, gt_key = self._keys(view)
+            wanted = []
+            if view in self.imagined_views:
+                n = len(tl.rollout.video(view))
+                wanted += [(*imagined_key, 0, size), (*imagined_key, n - 1, size)]
+            if view in tl.gt.clips:
+                wanted += [(*gt_key, 0, size), (*gt_key, tl.gt.frames_in_clip(view) - 1, size)]
         except Exception:
             return False
-        imagined_key, gt_key = self._keys(view)
-        wanted = [(*imagined_key, 0, size), (*imagined_key, n - 1, size)]
-        if view in tl.gt.clips:
-            wanted.append((*gt_key, 0, size))
         return all(k in self._cache for k in wanted)
 
     def _fill(self, view: str) -> None:
@@ -188,13 +203,14 @@ class FrameStore:
         self._executor.submit(self._fill_view, view)
 
     def _fill_view(self, view: str) -> None:
-        """Stream the view's imagined and GT clips into the cache, computing PSNR on the way."""
+        """Stream the view's clips into the cache, computing PSNR on the way where it has both."""
         from ..errors import InspectorError
         from ..video_metrics import compare_clips
 
         tl = self.timeline
         gt_clip = tl.gt.clips.get(view)
         imagined_key, gt_key = self._keys(view)
+        imagined_clips = [tl.rollout.video(view)] if view in self.imagined_views else []
 
         def imagined(_: int, f: int, rgb: npt.NDArray[np.uint8]) -> None:
             self._store(view, (*imagined_key, f), rgb)
@@ -203,21 +219,23 @@ class FrameStore:
             self._store(view, (*gt_key, i), rgb)
 
         def run(with_gt: bool):
-            return compare_clips(view, [tl.rollout.video(view)], gt_clip if with_gt else None,
-                                 tl.gt_index_of_frame(view) if with_gt else (lambda f: -1),
-                                 on_imagined=imagined, on_gt=gt_frame if with_gt else None)[0]
+            results = compare_clips(view, imagined_clips, gt_clip if with_gt else None,
+                                    tl.gt_index_of_frame(view) if with_gt else (lambda f: -1),
+                                    on_imagined=imagined, on_gt=gt_frame if with_gt else None)
+            return results[0] if results else None
 
         try:
             vm = run(with_gt=gt_clip is not None)
             self.status[view] = READY
             if gt_clip is not None:
                 self.gt_status[view] = READY
+            if vm is not None and self._compared(view):
                 self.psnr[view] = vm.psnr_db
                 tl.set_video_metrics(vm)
                 if self._on_video_metrics is not None:
                     self._on_video_metrics(vm)
         except InspectorError as exc:
-            if gt_clip is not None and exc.file == str(gt_clip.path):
+            if gt_clip is not None and exc.file == str(gt_clip.path) and imagined_clips:
                 # a broken GT clip: the imagined frames still show, without their GT
                 self.gt_status[view] = _one_line(exc)
                 try:
@@ -252,14 +270,17 @@ class FrameStore:
         the same episode and start frame is cached once for all of them)."""
         tl = self.timeline
         gt = tl.gt.clips.get(view)
-        return ("imagined", *tl.rollout.video(view).key), ("gt", *(gt.key if gt is not None else (view,)))
+        imagined = tl.rollout.video(view).key if view in self.imagined_views else (view,)
+        return ("imagined", *imagined), ("gt", *(gt.key if gt is not None else (view,)))
 
     def display_size(self, view: str) -> tuple[int, int]:
-        """(width, height) the view's frames are shown at: the imagined clip's, at most
-        :data:`DISPLAY_MAX_WIDTH` wide (GT frames are shown at the same size)."""
+        """(width, height) the view's frames are shown at: the imagined clip's (else the GT
+        clip's), at most :data:`DISPLAY_MAX_WIDTH` wide; GT frames are shown at the same size."""
         size = self._sizes.get(view)
         if size is None:
-            info = self.timeline.rollout.video(view).info()
+            tl = self.timeline
+            clip = tl.rollout.video(view) if view in self.imagined_views else tl.gt.clips[view]
+            info = clip.info()
             size = self._sizes[view] = fit_size(info.width, info.height, DISPLAY_MAX_WIDTH)
         return size
 
@@ -288,24 +309,27 @@ class FrameStore:
 
     # -- lookups on the scrub path (never decode) ---------------------------------------------
     def pair(self, view: str, step: int) -> FramePair:
-        """The imagined frame of ``view`` at ``step`` and the GT frame at the same time."""
+        """The imagined frame of ``view`` at ``step`` and the GT frame at the same time (a view
+        without imagined video has only the GT frame)."""
         tl = self.timeline
         f = tl.frame_index(step)
-        out = FramePair(view=view, status=self.status.get(view, LOADING), imagined_index=f)
+        out = FramePair(view=view, status=self.status.get(view, LOADING), imagined_index=f,
+                        has_imagined=view in self.imagined_views)
         if out.status not in (LOADING, READY):
-            return out  # the imagined clip is broken: its error is the status
+            return out  # the view's clip is broken: its error is the status
         try:
             size = self.display_size(view)
         except Exception as exc:
             out.status = _one_line(exc)
             return out
         imagined_key, gt_key = self._keys(view)
-        out.imagined = self._cache.get((*imagined_key, f, size))
-        if out.imagined is None:
-            out.status = LOADING
-            self._fill(view)  # evicted since (or still on its way): decode again in the background
-            return out
-        out.status = READY
+        if out.has_imagined:
+            out.imagined = self._cache.get((*imagined_key, f, size))
+            if out.imagined is None:
+                out.status = LOADING
+                self._fill(view)  # evicted since (or still on its way): decode again in the background
+                return out
+            out.status = READY
         if self.gt_status[view] not in (LOADING, READY):
             out.gt_note = self.gt_status[view]
             return out
@@ -317,10 +341,12 @@ class FrameStore:
         if gt_index is None:
             out.gt_note = "past the real episode's end"
         else:
-            out.gt = self._cache.get((*gt_key, gt_index, size))
+            out.gt, out.gt_index = self._cache.get((*gt_key, gt_index, size)), gt_index
             if out.gt is None:
                 out.gt_note = LOADING
                 self._fill(view)
+        if not out.has_imagined:  # a camera alone: ready when its frame is
+            out.status = LOADING if out.gt_note == LOADING else READY
         psnr = self.psnr.get(view)
         if out.gt is not None and psnr is not None and f < len(psnr) and np.isfinite(psnr[f]):
             out.psnr_db = float(psnr[f])

@@ -21,6 +21,7 @@ SPEEDS = ("0.25x", "0.5x", "1x", "2x", "4x")
 NO_COMPARE = "— none —"
 PRED_HEX, GT_HEX, CMP_HEX = "#f08c00", "#2b8a3e", "#1c7ed6"
 BM_HEX, DTW_HEX, LIMIT_HEX = "#7048e8", "#868e96", "#e03131"
+JOINT_HEX = ("#1c7ed6", "#2b8a3e", "#f08c00", "#ae3ec9", "#0ca678", "#e03131")
 
 
 class ControlPanel:
@@ -109,11 +110,17 @@ class PlotPanel:
         end = float(tl.episode_end_step / tl.fps) if tl.episode_end_step is not None else None
         common = {"ticks": ticks, "end": end}
         with self.tab_drift:
-            if tl.has_gt_joints:
+            if tl.kind == "episode":
+                self._add(CursorPlot(gui, f"Tracking error |commanded − measured| [{u.strip() or 'units'}], "
+                                          "L2 over 6 joints", t,
+                                     [Line("tracking error", tl.time_aligned_drift, LIMIT_HEX, 1.6)], floor=0.0))
+                self._add(CursorPlot(gui, f"Per joint: commanded − measured [{u.strip() or 'units'}]", t, [
+                    Line(j, tl.joint_error[:, k], JOINT_HEX[k], 1.2) for k, j in enumerate(JOINT_NAMES)]))
+            elif tl.has_gt_joints:
                 per_chunk = tl.per_chunk(tl.time_aligned_drift)[tl.step_chunk]
                 self._add(CursorPlot(gui, f"Joint drift [{u.strip() or 'units'}], L2 over 6 joints", t, [
                     Line("time-aligned", tl.time_aligned_drift, LIMIT_HEX, 1.6),
-                    Line("best-match", tl.best_match_drift, BM_HEX, 1.4),
+                    *([Line("best-match", tl.best_match_drift, BM_HEX, 1.4)] if tl.best_match_drift is not None else []),
                     Line("time-aligned, chunk mean", per_chunk, LIMIT_HEX, 1.0, (4, 3)),
                     *([Line("DTW", tl.dtw_drift, DTW_HEX, 1.0, (2, 2))] if tl.dtw_drift is not None else []),
                 ], floor=0.0, **common))
@@ -142,10 +149,13 @@ class PlotPanel:
             self.joint_plot.set_lines(self._joint_lines(self.joint.value), title=self._joint_title())
         with self.tab_ee:
             if tl.ee_error_mm is not None:
-                self._add(CursorPlot(gui, "End-effector error [mm]", t, [
-                    Line("|pred − GT| at gripper frame", tl.ee_error_mm, PRED_HEX)], floor=0.0, **common))
-            self.psnr_plot = self._add(CursorPlot(gui, "Video PSNR, imagined vs GT [dB]", *self._psnr_xy(psnr),
-                                                  **common))
+                labels = tl.labels
+                self._add(CursorPlot(gui, f"End-effector {'tracking ' if tl.kind == 'episode' else ''}error [mm]", t, [
+                    Line(f"|{labels.pred} − {labels.gt}| at gripper frame", tl.ee_error_mm, PRED_HEX)],
+                    floor=0.0, **common))
+            if tl.rollout.views:
+                self.psnr_plot = self._add(CursorPlot(gui, "Video PSNR, imagined vs GT [dB]", *self._psnr_xy(psnr),
+                                                      **common))
 
     def _add(self, plot: CursorPlot) -> CursorPlot:
         self.plots.append(plot)
@@ -160,15 +170,18 @@ class PlotPanel:
         tl = self._tl
         j = self.joint.value
         u = "0..100" if j == "gripper" else ("deg" if tl is None or tl.units.arm == "degrees" else "-100..100")
-        return f"{j} [{u}]: predicted vs GT, limits dashed"
+        labels = tl.labels if tl is not None else None
+        pair = f"{labels.pred} vs {labels.gt}" if labels is not None and tl.has_gt_joints else (
+            labels.pred if labels is not None else "predicted")
+        return f"{j} [{u}]: {pair}, limits dashed"
 
     def _joint_lines(self, joint: str) -> list[Line]:
         tl = self._tl
         assert tl is not None
         j = JOINT_NAMES.index(joint)
-        lines = [Line("predicted", tl.pred[:, j], PRED_HEX, 1.6)]
+        lines = [Line(tl.labels.pred, tl.pred[:, j], PRED_HEX, 1.6)]
         if tl.gt_aligned is not None:
-            lines.append(Line("GT", tl.gt_aligned[:, j], GT_HEX, 1.6))
+            lines.append(Line(tl.labels.gt, tl.gt_aligned[:, j], GT_HEX, 1.6))
         if self._cmp is not None:
             y = np.full(tl.n_steps, np.nan)
             n = min(tl.n_steps, self._cmp.n_steps)

@@ -61,6 +61,7 @@ class RolloutScene:
     joint_pos: Array
     executed: int
     steps_per_chunk: int
+    horizon_trail: bool = True  # an episode's one "chunk" is its whole command: its path says it all
 
     @property
     def n_steps(self) -> int:
@@ -87,6 +88,7 @@ class RolloutScene:
             joint_pos=joint_pos,
             executed=executed,
             steps_per_chunk=tl.steps_per_chunk,
+            horizon_trail=tl.kind != "episode",
         )
 
 
@@ -202,7 +204,7 @@ class TabScene:
         if self.compare is not None and self.cmp_arm is not None:
             self.cmp_arm.set_joints(self.compare.q_pred[min(step, self.compare.n_steps - 1)])
         chunk = min(step // data.steps_per_chunk, len(data.trail) - 1)
-        if chunk != self._trail_chunk:
+        if chunk != self._trail_chunk and data.horizon_trail:
             self._draw_trail(chunk)
         for j, text in enumerate(limit_text or [""] * len(JOINT_NAMES)):
             on = bool(text)

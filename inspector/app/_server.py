@@ -127,7 +127,8 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
     """Serve sessions in the browser (the bundled demo when ``paths`` is empty).
 
     Args:
-        paths: sessions, rollout directories or DreamZero-SO101 outputs (see ``open_sources``).
+        paths: sessions, rollout directories, DreamZero-SO101 outputs or LeRobot datasets
+            (directories, or ``org/name`` in the local LeRobot cache; see ``open_sources``).
         host: interface to bind; 127.0.0.1 unless the user asks otherwise.
         port: TCP port (0 = any free port).
         share: also request a public viser share URL.
@@ -148,12 +149,17 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
             raise InspectorError(BUNDLED_DEMO, "the bundled demo session is not built yet; build it with "
                                  "`inspector demo --rebuild`, or serve a session: `inspector serve PATH`")
         paths = [BUNDLED_DEMO]
-    sources = open_sources(paths, dataset=dataset, confine=True)  # no link leads out of a root
+    # no link leads out of a root; datasets are browsed episode by episode
+    sources = open_sources(paths, dataset=dataset, confine=True, datasets=True)
     app = InspectorApp(sources, host=host, port=port, cache_mb=cache_mb,
                        metrics_cache=MetricsCache(enabled=use_cache))
     n_ok = sum(len(s.rollouts) for s in sources.sessions)
     n_bad = sum(len(s.errors) for s in sources.sessions)
-    print(f"inspector: serving {n_ok} rollout(s) from {len(sources.sessions)} session(s)"
+    served = [f"{n_ok} rollout(s) from {len(sources.sessions)} session(s)"] if sources.sessions else []
+    if sources.datasets:
+        n_eps = sum(len(d.episodes) for d in sources.datasets)
+        served.append(f"{n_eps} episode(s) of {len(sources.datasets)} dataset(s)")
+    print(f"inspector: serving {' and '.join(served) or 'nothing'}"
           + (f" ({n_bad} could not be read; see the app)" if n_bad else "") + f" at {app.url}", flush=True)
     if share:
         url = app.server.request_share_url(verbose=False)

@@ -42,6 +42,9 @@ if TYPE_CHECKING:
     from ._server import InspectorApp
 
 PLAYBACK_FPS = 30.0
+NOTES_NEED_A_SESSION = ("<div style='font-size:0.75rem;color:#6b7280'>Notes are kept in a session's "
+                        "annotations.json; a dataset's episodes have none (the dataset is never written to)."
+                        "</div>")
 PLOT_CURSOR_HZ = 10.0
 
 
@@ -192,7 +195,9 @@ class TabState:
         self._set_quietly(c.step_in_chunk, 0)
         c.chunk.max = max(tl.n_chunks - 1, 0)
         c.step_in_chunk.max = max(tl.steps_per_chunk - 1, 0)
-        c.step_in_chunk.label = "Step in chunk" if tl.kind == "autoregressive" else "Step"
+        c.step_in_chunk.label = {"autoregressive": "Step in chunk", "episode": "Frame"}.get(tl.kind, "Step")
+        # one chunk (a single-chunk sample, an episode): no chunk slider or chunk buttons
+        c.chunk.visible = c.nav.visible = tl.n_chunks > 1
         cmp = self.compare
         self.scene.show(loaded.scene, cmp.scene if cmp is not None else None)
         self.plots.build(tl, cmp.timeline if cmp is not None else None, loaded.frames.psnr)
@@ -328,11 +333,17 @@ class TabState:
             notes.append(f"<span style='color:#c92a2a'>over limit: {', '.join(over)}</span>")
         if tl.time_aligned_drift is not None:
             u = unit(tl)
-            notes.append(f"drift {tl.time_aligned_drift[step]:.1f}{u} (best-match {tl.best_match_drift[step]:.1f}{u})")
+            best = f" (best-match {tl.best_match_drift[step]:.1f}{u})" if tl.best_match_drift is not None else ""
+            notes.append(f"{tl.labels.drift} {tl.time_aligned_drift[step]:.1f}{u}{best}")
+        if tl.kind == "episode":
+            where = f"frame {step} / {tl.n_steps - 1}"
+        else:
+            where = (f"step {step} / {tl.n_steps - 1}"
+                     + (f" · chunk {chunk} / {tl.n_chunks - 1}" if tl.n_chunks > 1 else "")
+                     + (f" · imagined frame {tl.frame_index(step)}" if tl.rollout.views else ""))
         c.readout.content = (
             "<div style='font-size:0.78rem;line-height:1.4'>"
-            f"t = <b>{tl.t_s[step]:.2f} s</b> · step {step} / {tl.n_steps - 1} · chunk {chunk} / "
-            f"{tl.n_chunks - 1} · imagined frame {tl.frame_index(step)}"
+            f"t = <b>{tl.t_s[step]:.2f} s</b> · {where}"
             + (f"<br>{' · '.join(notes)}" if notes else "") + "</div>")
         if chunk != self._shown_chunk:
             self._shown_chunk = chunk
@@ -403,7 +414,9 @@ class TabState:
         self._notes = {}
         c.notes_info.content = ""
         entry = self.app.catalog.get(self.key) if self.key else None
-        if entry is not None:
+        if entry is not None and entry.session is None:
+            c.notes_info.content = NOTES_NEED_A_SESSION
+        elif entry is not None:
             try:
                 self._notes = rollout_annotations(entry.session.root, entry.tag)
             except InspectorError as exc:
@@ -434,6 +447,9 @@ class TabState:
             if entry is None or self.loaded is None:
                 return False
             c = self.controls
+            if entry.session is None:  # a dataset episode: the dataset is never written to
+                c.notes_info.content = NOTES_NEED_A_SESSION
+                return False
             chunk = self.chunk
             try:
                 # Only ever <served session>/annotations.json (the root comes from the catalog).
