@@ -73,6 +73,7 @@ def write_recording(timeline: RolloutTimeline, path: str | Path, views: Sequence
         gt_joints=timeline.has_gt_joints,
         psnr_views=[v for v, series in psnr.items() if np.isfinite(series).any()],
         pred_name=timeline.labels.pred, gt_name=timeline.labels.gt, chunks=timeline.n_chunks > 1,
+        eye=eye_fitting(timeline),
     )
     path.parent.mkdir(parents=True, exist_ok=True)
     # a fresh name the stream creates itself (mkstemp's 0600 would stick to the final file)
@@ -92,6 +93,22 @@ def write_recording(timeline: RolloutTimeline, path: str | Path, views: Sequence
         raise
     report(1.0, "done")
     return path
+
+
+def eye_fitting(tl: RolloutTimeline) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """The 3D view's (position, look target): every tool path and every chunk's horizon in view
+    (a wandering prediction used to run off the top), seen from the front right, above."""
+    from .kinematics import kinematics
+    from .robot import VIEW_DIRECTION, bounding_sphere
+
+    points = [tl.ee_pred, kinematics().gripper_positions(tl.chunks.reshape(-1, tl.chunks.shape[-1]), tl.units),
+              np.zeros((1, 3)), np.array([[0.0, 0.0, 0.3]])]  # the base, and the arm's own height
+    if tl.ee_gt is not None:
+        points.append(tl.ee_gt)
+    centre, radius = bounding_sphere(np.concatenate(points))
+    distance = radius / np.tan(np.radians(55) / 2) * 1.1  # within the viewer's default field of view
+    eye = centre + np.asarray(VIEW_DIRECTION) * distance
+    return (tuple(float(v) for v in eye), tuple(float(v) for v in centre))  # type: ignore[return-value]
 
 
 def _log_recording(rec: rr.RecordingStream, tl: RolloutTimeline, views: list[str],

@@ -15,7 +15,7 @@ Entity tree::
     /plots/joint_error/<joint>        prediction - GT per joint
     /plots/joints/<joint>/...         predicted, GT, limits, limit-violation markers
     /plots/ee_error_mm, /plots/psnr/<view>, /plots/chunk_rmse
-    /plots/markers/{chunk_start,episode_end}
+    /plots/markers/episode_end
     /events                           TextLog at chunk boundaries and the episode's end
 
 Timelines: ``time`` (duration, s), ``frame`` (imagined frame), ``chunk``.
@@ -87,7 +87,6 @@ PRED_RGBA = (60, 130, 255, 255)
 PRED_MESH_RGBA = {"printed": (0.25, 0.55, 1.0, 0.45), "servo": (0.08, 0.2, 0.5, 0.45)}
 PRED_MESH_DEFAULT = (0.25, 0.55, 1.0, 0.45)
 LIMIT_RGBA = (230, 40, 40, 255)
-MARKER_RGBA = (150, 150, 150, 255)
 JOINT_RGBA = {
     "shoulder_pan": (31, 119, 180, 255),
     "shoulder_lift": (255, 127, 14, 255),
@@ -143,6 +142,7 @@ class Contents:
         psnr_views: views with a PSNR series.
         pred_name, gt_name: the arms' names in titles.
         chunks: the rollout has several chunks.
+        eye: the 3D view's camera (position, look target) [m].
     """
 
     views: dict[str, tuple[bool, bool]] = field(default_factory=dict)
@@ -151,6 +151,8 @@ class Contents:
     pred_name: str = "predicted"  # what the two arms are ("commanded" / "measured" for an episode)
     gt_name: str = "GT"
     chunks: bool = True  # more than one chunk (else no chunk RMSE plot)
+    # the 3D view's eye: (position, look target) [m], fitted to everything drawn
+    eye: tuple[tuple[float, float, float], tuple[float, float, float]] = ((0.55, -0.45, 0.4), (0.15, 0.0, 0.1))
 
 
 def build_blueprint(contents: Contents) -> rrb.Blueprint:
@@ -165,10 +167,11 @@ def build_blueprint(contents: Contents) -> rrb.Blueprint:
                                         contents=["$origin/**", markers]))
         plots.append(rrb.TimeSeriesView(name="End-effector error [mm]", origin=f"/{EE_ERROR}",
                                         contents=["$origin", markers]))
+    # two columns: three narrow plots a row cut the joint names short ("should...")
     plots.append(rrb.Grid(*[rrb.TimeSeriesView(name=j, origin=f"/{PLOTS}/joints/{j}",
                                                contents=["$origin/**", markers],
                                                plot_legend=rrb.PlotLegend(visible=False))
-                            for j in JOINT_NAMES], name="Joints"))
+                            for j in JOINT_NAMES], grid_columns=2, name="Joints"))
     if contents.psnr_views:
         plots.append(rrb.TimeSeriesView(name="Video PSNR [dB]", origin=f"/{PLOTS}/psnr",
                                         contents=["$origin/**", markers]))
@@ -181,7 +184,7 @@ def build_blueprint(contents: Contents) -> rrb.Blueprint:
     scene = rrb.Spatial3DView(
         name=title, origin=f"/{WORLD}",
         contents=["$origin/**"],
-        eye_controls=rrb.EyeControls3D(position=(0.55, -0.45, 0.4), look_target=(0.15, 0.0, 0.1),
+        eye_controls=rrb.EyeControls3D(position=contents.eye[0], look_target=contents.eye[1],
                                        eye_up=(0.0, 0.0, 1.0)),
     )
     pairs = [

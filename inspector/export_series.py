@@ -49,6 +49,8 @@ def log_metric_series(rec: rr.RecordingStream, tl: RolloutTimeline, indexes_for:
         series = getattr(tl, attr)
         if series is not None:
             name = tl.labels.drift if attr == "time_aligned_drift" else name  # an episode's tracking error
+            if attr != "time_aligned_drift" and _same(series, tl.time_aligned_drift):
+                name += " (= time-aligned: drawn on top of it)"  # else one line seems to be missing
             log_series(rec, entity, steps, series, indexes_for, f"{name} [{unit}]", rgba)
     if tl.joint_error is not None:
         for j, joint in enumerate(JOINT_NAMES):
@@ -89,10 +91,10 @@ def log_psnr(rec: rr.RecordingStream, tl: RolloutTimeline, view: str, psnr_db: n
 
 
 def log_markers(rec: rr.RecordingStream, tl: RolloutTimeline, indexes_for: IndexesFor) -> None:
-    """Chunk starts and the episode's end: markers at y = 0 in every plot, and text events."""
+    """Chunk starts as text events (the ``chunk`` timeline steps through them; drawn in the
+    plots, 60 of them read as a grey band of data at y = 0), and the episode's end: a marker in
+    every plot and an event."""
     starts = np.minimum(tl.chunk_start_step, tl.n_steps - 1)
-    log_series(rec, f"{L.MARKERS}/chunk_start", starts, np.zeros(len(starts)), indexes_for,
-               "chunk start", L.MARKER_RGBA, points=True, marker="up", marker_size=3.0)
     texts = [f"chunk {k} starts (step {s}, {tl.t_s[s]:.2f} s)" for k, s in enumerate(starts)]
     rec.send_columns(L.EVENTS, indexes_for(starts), rr.TextLog.columns(text=texts, level=["INFO"] * len(texts)))
     end = tl.episode_end_step
@@ -102,6 +104,10 @@ def log_markers(rec: rr.RecordingStream, tl: RolloutTimeline, indexes_for: Index
         rec.send_columns(L.EVENTS, indexes_for(np.array([end])), rr.TextLog.columns(
             text=[f"the real episode ends at step {end} ({tl.t_s[end]:.2f} s): "
                   "later steps are post-episode"], level=["WARN"]))
+
+
+def _same(a: npt.ArrayLike | None, b: npt.ArrayLike | None) -> bool:
+    return a is not None and b is not None and np.allclose(a, b, rtol=0, atol=1e-9)
 
 
 def _unit_hint(tl: RolloutTimeline) -> str:

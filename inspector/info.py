@@ -28,7 +28,9 @@ def describe(path: Path) -> dict[str, Any]:
         session = open_session(path)
         rollouts = [_rollout_info(r) for r in session.rollouts.values()]
         info: dict[str, Any] = {"format": "session", "name": session.name,
-                                "units": session.units.to_json(), "model": session.model,
+                                "units": session.units.to_json(), "units_label": session.units.label(),
+                                "model": session.model, "gt_source": session.gt_source,
+                                "gt_dataset": str(session.dataset_root) if session.dataset_root else None,
                                 "rollouts": sorted(rollouts, key=lambda r: r["tag"])}
         if session.errors:
             info["errors"] = {tag: str(err) for tag, err in sorted(session.errors.items())}
@@ -59,12 +61,21 @@ def format_info(info: dict[str, Any]) -> str:
                  f"{'episode':>7}  {'length':>6}  task"]
         lines += [f"{e['index']:>7}  {e['length']:>6}  {e['task']}" for e in info["episodes"]]
         return "\n".join(lines)
-    lines = [f"session {info.get('name', '')}".rstrip(),
-             f"{'tag':<16} {'kind':<15} {'chunks':>6} {'horizon':>7} {'exec':>4}  {'GT joints':<9}  views"]
+    lines = [f"session {info.get('name', '')}".rstrip()]
+    model = info.get("model") or {}
+    if "units_label" in info:  # a whole session (not one rollout named on its own)
+        gt = info.get("gt_source") or {}
+        lines += [f"model: {' / '.join(str(model[k]) for k in ('name', 'checkpoint') if model.get(k)) or '-'}",
+                  f"units: {info['units_label']}",
+                  f"GT source: {info.get('gt_dataset') or gt.get('repo_id') or 'carried with each rollout, or none'}"]
+    width = max([16] + [len(r["tag"]) for r in info["rollouts"]])
+    lines.append(f"{'tag':<{width}} {'kind':<15} {'chunks':>6} {'horizon':>7} {'exec':>4}  {'GT joints':<9}  views")
     for r in info["rollouts"]:
-        lines.append(f"{r['tag']:<16} {r['kind']:<15} {r['n_chunks']:>6} {r['horizon']:>7} "
-                     f"{r['executed_per_chunk']:>4}  {'yes' if r['has_gt_joints'] else 'no':<9}  "
+        # a single chunk is judged on its whole horizon: "executed" does not apply
+        executed = r["executed_per_chunk"] if r["kind"] == "autoregressive" else "-"
+        lines.append(f"{r['tag']:<{width}} {r['kind']:<15} {r['n_chunks']:>6} {r['horizon']:>7} "
+                     f"{executed:>4}  {'yes' if r['has_gt_joints'] else 'no':<9}  "
                      f"{', '.join(r['views'])}")
     for tag, err in info.get("errors", {}).items():
-        lines.append(f"{tag:<16} error: {err}")
+        lines.append(f"{tag:<{width}} error: {err}")
     return "\n".join(lines)

@@ -94,3 +94,18 @@ def load_urdf(load_meshes: bool = True) -> RobotModel:
         filename_handler=yourdfpy.filename_handler_null,
     )
     return RobotModel(urdf=urdf, fallback_reason=reason)
+
+
+# From where the app and recordings look at the arm: front right, above (unit vector, base frame).
+VIEW_DIRECTION = (0.6202, -0.6202, 0.4802)
+
+
+def bounding_sphere(points) -> tuple["np.ndarray", float]:
+    """(centre, radius) [m] holding the 1st-99th percentile of (N, 3) points: what a view must
+    show (a stray far point never zooms it out); at least 0.12 m."""
+    import numpy as np
+
+    pts = np.asarray(points, np.float64).reshape(-1, 3)
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    lo, hi = np.percentile(pts, 1, axis=0), np.percentile(pts, 99, axis=0)
+    return (lo + hi) / 2, max(float(np.linalg.norm(hi - lo)) / 2, 0.12)

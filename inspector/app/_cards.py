@@ -14,11 +14,11 @@ import numpy as np
 
 from ..errors import InspectorError
 from ..timeline import RolloutTimeline
-from ._frames import LOADING, FramePair
+from ._frames import LOADING, READY, FramePair
 
 CARD = "font-size:0.8rem;line-height:1.35;padding:0.1rem 0.2rem"
-TABLE = "border-collapse:collapse;width:100%;font-size:0.78rem"
-TD = "padding:1px 4px;vertical-align:top"
+GRID = ("display:grid;grid-template-columns:minmax(5.5rem,34%) minmax(0,1fr);column-gap:6px;row-gap:2px;"
+        "font-size:0.78rem;overflow-wrap:anywhere")
 MUTED = "color:#6b7280"
 _SWATCH = "<span style='color:{}'>■</span> {}"
 SCENE_LEGEND = " · ".join(_SWATCH.format(c, t) for c, t in (
@@ -163,10 +163,10 @@ def episode_card(tl: RolloutTimeline, metrics: Sequence[tuple[str, str]]) -> str
 
 
 def _card_table(tag: str, rows: Sequence[tuple[str, str]]) -> str:
-    body = "".join(f"<tr><td style='{TD};{MUTED};white-space:nowrap'>{k}</td><td style='{TD}'>{v}</td></tr>"
-                   for k, v in rows)
+    """Name / value rows in two columns that wrap (long paths and prompts never run off the panel)."""
+    body = "".join(f"<div style='{MUTED}'>{k}</div><div>{v}</div>" for k, v in rows)
     return (f"<div class='inspector-card' data-rollout='{esc(tag)}' style='{CARD}'>"
-            f"<table style='{TABLE}'>{body}</table></div>")
+            f"<div style='{GRID}'>{body}</div></div>")
 
 
 def error_card(title: str, error: BaseException) -> str:
@@ -185,46 +185,54 @@ def error_card(title: str, error: BaseException) -> str:
     )
 
 
-def video_grid(pairs: Sequence[FramePair], step: int, t_s: float) -> str:
-    """One column per view: the imagined frame above the GT frame at the same time, with their PSNR."""
+def video_grid(pairs: Sequence[FramePair], step: int, t_s: float,
+               compare: dict[str, FramePair] | None = None, compare_tag: str | None = None,
+               large: bool = False) -> str:
+    """One row per view: the imagined frame beside the GT frame at the same time (and the compared
+    rollout's imagined frame), with the PSNR of each pair; ``large`` stacks one view's frames."""
     if not pairs:
         return f"<div style='{CARD};{MUTED}'>No video for this rollout.</div>"
-    img = "width:100%;display:block;border-radius:3px;background:#222"
-    box = ("width:100%;aspect-ratio:320/176;display:flex;align-items:center;justify-content:center;"
-           "background:#e9ecef;color:#6b7280;font-size:0.7rem;border-radius:3px;text-align:center")
-    cap = "font-size:0.66rem;text-align:center;margin-bottom:3px"
-    cols = []
+    compare = compare or {}
+    rows = []
     for p in pairs:
-        if not p.has_imagined:  # a camera with real frames only (a dataset episode's cameras)
-            frame = (f"<img class='inspector-frame' data-view='{esc(p.view)}' data-kind='gt' "
-                     f"data-step='{step}' src='{p.gt}' style='{img}'>" if p.gt is not None
-                     else f"<div style='{box}'>loading…</div>" if p.status == LOADING
-                     else f"<div style='{box}'>{esc(p.gt_note or p.status)}</div>")
-            index = f" · frame {p.gt_index}" if p.gt_index is not None else ""
-            cols.append(f"<div style='min-width:0'><div style='font-size:0.72rem'><b>{esc(p.view)}</b></div>"
-                        f"{frame}<div style='{cap};color:#2b8a3e'>camera{index}</div></div>")
-            continue
-        psnr = f"PSNR {p.psnr_db:.1f} dB" if p.psnr_db is not None else "PSNR —"
-        if p.status == LOADING:
-            top = bottom = f"<div style='{box}'>loading…</div>"
-        elif p.imagined is None:
-            top = f"<div style='{box};color:#c92a2a'>{esc(p.status)}</div>"
-            bottom = f"<div style='{box}'>—</div>"
-        else:
-            top = (f"<img class='inspector-frame' data-view='{esc(p.view)}' data-kind='imagined' "
-                   f"data-frame='{p.imagined_index}' src='{p.imagined}' style='{img}'>")
-            bottom = (f"<img class='inspector-frame' data-view='{esc(p.view)}' data-kind='gt' "
-                      f"data-step='{step}' src='{p.gt}' style='{img}'>" if p.gt is not None
-                      else f"<div style='{box}'>loading…</div>" if p.gt_note == LOADING
-                      else f"<div style='{box}'>no GT frame<br>({esc(p.gt_note)})</div>")
-        cols.append(
-            "<div style='min-width:0'>"
-            f"<div style='display:flex;justify-content:space-between;font-size:0.72rem'>"
-            f"<b>{esc(p.view)}</b><span>{psnr}</span></div>"
-            f"{top}<div style='{cap};color:#e8590c'>imagined · frame {p.imagined_index}</div>"
-            f"{bottom}<div style='{cap};color:#2b8a3e'>ground truth · same time</div></div>"
-        )
-    grid = f"display:grid;grid-template-columns:repeat({len(cols)},minmax(0,1fr));gap:6px"
-    return (f"<div class='inspector-video' data-step='{step}' style='font-family:sans-serif'>"
-            f"<div style='{grid}'>{''.join(cols)}</div>"
-            f"<div style='font-size:0.7rem;color:#6b7280;margin-top:2px'>t = {t_s:.2f} s · step {step}</div></div>")
+        cells = []
+        if p.has_imagined:
+            cells.append(_frame_cell(p.view, "imagined", p.imagined, p.status,
+                                     f"imagined · frame {p.imagined_index}", "#e8590c",
+                                     f"data-frame='{p.imagined_index}'"))
+            gt_status = p.status if p.status != READY else (LOADING if p.gt_note == LOADING else
+                                                             f"no GT frame ({p.gt_note})")
+            gt_caption = "ground truth · same time"
+        else:  # a camera with real frames only (a dataset episode's cameras)
+            gt_status = p.status if p.status != READY else (p.gt_note or LOADING)
+            gt_caption = f"camera · frame {p.gt_index}" if p.gt_index is not None else "camera"
+        cells.append(_frame_cell(p.view, "gt", p.gt, gt_status, gt_caption, "#2b8a3e", f"data-step='{step}'"))
+        c = compare.get(p.view)
+        if c is not None:
+            psnr_c = f" · PSNR {c.psnr_db:.1f} dB" if c.psnr_db is not None else ""
+            cells.append(_frame_cell(p.view, "compare", c.imagined, c.status,
+                                     f"{compare_tag or 'compared'} · imagined{psnr_c}", "#1c7ed6",
+                                     f"data-frame='{c.imagined_index}'"))
+        psnr = f"PSNR {p.psnr_db:.1f} dB" if p.psnr_db is not None else ("PSNR —" if p.has_imagined else "")
+        columns = 1 if large else len(cells)
+        grid = f"display:grid;grid-template-columns:repeat({columns},minmax(0,1fr));gap:4px"
+        rows.append(f"<div style='margin-bottom:6px'><div style='display:flex;justify-content:space-between;"
+                    f"font-size:0.72rem'><b>{esc(p.view)}</b><span>{psnr}</span></div>"
+                    f"<div style='{grid}'>{''.join(cells)}</div></div>")
+    return (f"<div class='inspector-video' data-step='{step}' style='font-family:sans-serif'>{''.join(rows)}"
+            f"<div style='font-size:0.7rem;color:#6b7280'>t = {t_s:.2f} s · step {step}</div></div>")
+
+
+def _frame_cell(view: str, kind: str, src: str | None, status: str, caption: str, colour: str, data: str) -> str:
+    """One frame with its caption, or a grey box saying why there is none (loading, an error)."""
+    if src is not None:
+        body = (f"<img class='inspector-frame' data-view='{esc(view)}' data-kind='{kind}' {data} src='{src}' "
+                "style='width:100%;display:block;border-radius:3px;background:#222'>")
+    else:
+        error = status != LOADING and not status.startswith("no GT frame")
+        body = (f"<div style='width:100%;aspect-ratio:320/176;display:flex;align-items:center;"
+                f"justify-content:center;background:#e9ecef;color:{'#c92a2a' if error else '#6b7280'};"
+                f"font-size:0.7rem;border-radius:3px;text-align:center;padding:2px'>"
+                f"{'loading…' if status == LOADING else esc(status)}</div>")
+    return (f"<div style='min-width:0'>{body}"
+            f"<div style='font-size:0.66rem;text-align:center;color:{colour}'>{esc(caption)}</div></div>")

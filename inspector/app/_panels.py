@@ -35,27 +35,28 @@ class ControlPanel:
         # data-inspector-client lets a test find the server-side tab of a page.
         gui.add_html(f"<div data-inspector-client='{int(client_id)}' style='font-weight:600;"
                      "font-size:0.95rem;padding:0 0.2rem'>SO-101 rollout inspector</div>")
-        self.picker = gui.add_dropdown("Rollout", options, initial_value=options[0],
-                                       hint="Sessions and rollouts under the served paths")
+        self.picker = gui.add_dropdown("Rollout", options, initial_value=options[0])
         self.error = gui.add_html("", visible=False)
         self.card = gui.add_html("")
         with gui.add_folder("Timeline"):
-            self.chunk = gui.add_slider("Chunk", 0, 1, 1, 0, hint="Predicted chunk (PageUp/PageDown)")
-            self.step_in_chunk = gui.add_slider("Step in chunk", 0, 1, 1, 0,
-                                                hint="Executed step within the chunk (J / L)")
+            # no hints on controls that are dragged: a tooltip would sit over the thumb and labels
+            self.chunk = gui.add_slider("Chunk", 0, 1, 1, 0)
+            self.step_in_chunk = gui.add_slider("Step in chunk", 0, 1, 1, 0)
             self.readout = gui.add_html("")
-            self.play = gui.add_button("Play", icon="player-play", hint="Play / pause (K)")
+            self.play = gui.add_button("Play", icon="player-play")
             self.speed = gui.add_dropdown("Speed", SPEEDS, initial_value="1x")
             self.nav = gui.add_button_group("Go to chunk", ("◀ prev", "next ▶", "worst"))
+            gui.add_html("<div style='font-size:0.7rem;color:#6b7280;padding:0 0.2rem'>keys: J / L step · "
+                         "K play · PageUp / PageDown chunk · W worst chunk</div>")
         with gui.add_folder("Compare", expand_by_default=False):
-            self.compare = gui.add_dropdown("Compare with", [NO_COMPARE, *keys], initial_value=NO_COMPARE,
-                                            hint="Second rollout on the same timeline (e.g. novel prompt)")
+            self.compare = gui.add_dropdown("Compare with", [NO_COMPARE, *keys], initial_value=NO_COMPARE)
             self.compare_info = gui.add_html("")
         with gui.add_folder("Notes", expand_by_default=False):
+            # single-line fields: viser labels those for assistive tech (its multi-line ones it does not)
             self.flag_rollout = gui.add_checkbox("Flag rollout", False)
-            self.note_rollout = gui.add_text("Rollout note", "", multiline=True)
+            self.note_rollout = gui.add_text("Rollout note", "")
             self.flag_chunk = gui.add_checkbox("Flag this chunk", False)
-            self.note_chunk = gui.add_text("Chunk note", "", multiline=True)
+            self.note_chunk = gui.add_text("Chunk note", "")
             self.save_notes = gui.add_button("Save notes", icon="device-floppy")
             self.notes_info = gui.add_html("")
         self.export = gui.add_button("Export .rrd", icon="download",
@@ -65,11 +66,29 @@ class ControlPanel:
         return self.option_to_key.get(option)
 
 
+ALL_VIEWS = "all views"
+
+
 class VideoPanel:
-    """Imagined frame above the GT frame at the same time, one column per view."""
+    """Per camera view, the imagined frame beside the GT frame at the same time (and the compared
+    rollout's imagined frame); the selector shows one view large."""
 
     def __init__(self, gui) -> None:
+        self.view = gui.add_dropdown("Video", (ALL_VIEWS,), initial_value=ALL_VIEWS)
         self.html = gui.add_html("<div>loading…</div>")
+
+    def set_views(self, views: Sequence[str]) -> None:
+        options = (ALL_VIEWS, *views) if len(views) > 1 else (ALL_VIEWS,)
+        if tuple(self.view.options) != options:
+            self.view.options = options
+        if self.view.value not in options:
+            self.view.value = ALL_VIEWS
+        self.view.visible = len(views) > 1
+
+    @property
+    def selected(self) -> str | None:
+        """The view shown large, or None for all of them."""
+        return None if self.view.value == ALL_VIEWS else self.view.value
 
 
 class PlotPanel:

@@ -7,7 +7,9 @@ What is drawn (all in the robot base frame, metres):
 - the GT and predicted end-effector (gripper frame) paths as lines;
 - the current chunk's whole predicted horizon (24 steps) as a trail: the executed steps thick and
   dark, the rest thin; horizon steps past a joint limit as red points;
-- a red sphere and label at each joint that is past its limit at the current step.
+- a table top under the arm; the camera frames both arms and every path when a rollout opens;
+- a red sphere at each joint that is past its limit at the current step (listed, with values, in
+  the timeline readout).
 
 :class:`RolloutScene` holds the per-rollout arrays (computed once, shared by all tabs);
 :class:`TabScene` holds one client's scene nodes.
@@ -21,6 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..kinematics import kinematics
+from ..robot import VIEW_DIRECTION, bounding_sphere
 from ..timeline import RolloutTimeline
 from ..units import JOINT_NAMES, to_radians
 from ._robot import ArmView, SharedRobot
@@ -36,6 +39,7 @@ CMP_RGB = (40, 110, 240)
 EXECUTED_RGB = (200, 40, 0)
 HORIZON_RGB = (250, 170, 60)
 LIMIT_RGB = (230, 20, 20)
+TABLE_RGB = (228, 224, 216)
 
 
 @dataclass
@@ -125,7 +129,10 @@ class TabScene:
         scene = client.scene
         # Shadows of translucent arms read as clutter, and cost a lot on GPU-less browsers.
         scene.configure_default_lights(cast_shadow=False)
-        scene.add_grid("/ground", width=1.2, height=1.2, cell_size=0.05, section_size=0.25,
+        # a table top under the arm for scale and depth, the grid just above it (5 cm cells)
+        scene.add_box("/table", dimensions=(1.0, 1.0, 0.01), position=(0.15, 0.0, -0.0055),
+                      color=TABLE_RGB)
+        scene.add_grid("/ground", width=1.0, height=1.0, cell_size=0.05, section_size=0.25,
                        position=(0.15, 0.0, 0.0))
         arm = ArmView if robot is not None else _NoArm
         self.gt_arm = arm(client, robot, "/arms/gt", GT_COLOR)
@@ -139,16 +146,13 @@ class TabScene:
                                 visible=False)
             for j in JOINT_NAMES
         ]
-        self._limit_labels = [
-            scene.add_label(f"/limits/{j}/label", j, visible=False, anchor="bottom-left")
-            for j in JOINT_NAMES
-        ]
         self._paths: list = []
         self._trail: list = []
+        self._frame_when_ready: tuple | None = None
+        self._waiting_for_camera = False
         self._trail_chunk: int | None = None
         self.data: RolloutScene | None = None
         self.compare: RolloutScene | None = None
-        self._limit_text: list[str] = [""] * len(JOINT_NAMES)
 
     # -- rollout changes ----------------------------------------------------------------------
     def show(self, data: RolloutScene | None, compare: RolloutScene | None = None) -> None:
@@ -168,10 +172,11 @@ class TabScene:
             self.cmp_arm = arm(self._client, self._robot, "/arms/compare", CMP_COLOR)
         if self.cmp_arm is not None:
             self.cmp_arm.visible = has and compare is not None
-        for marker in (*self._limit_spheres, *self._limit_labels):
+        for marker in self._limit_spheres:
             marker.visible = False
         if not has:
             return
+        self._frame(data, compare)
         self._paths.append(scene.add_line_segments(
             "/paths/pred", _path_segments(data.ee_pred), PRED_RGB, thickness=2.0,
             thickness_units="screen"))
@@ -184,14 +189,44 @@ class TabScene:
                 "/paths/compare", _path_segments(compare.ee_pred), CMP_RGB, thickness=1.5,
                 thickness_units="screen"))
 
+    def _frame(self, data: RolloutScene, compare: RolloutScene | None) -> None:
+        """Point the camera at everything drawn: both arms over the whole rollout, the tool paths
+        and the chunk trails (a rollout that wanders off no longer runs out of the view). The
+        canvas is the gap between the docked panels, often taller than wide: the scene is fitted
+        to whichever of its two fields of view is narrower."""
+        points = [data.joint_pos.reshape(-1, 3), data.ee_pred, data.trail.reshape(-1, 3), np.zeros((1, 3))]
+        if data.ee_gt is not None:
+            points.append(data.ee_gt)
+        if compare is not None:
+            points += [compare.joint_pos.reshape(-1, 3), compare.ee_pred]
+        centre, radius = bounding_sphere(np.concatenate(points))
+        camera = self._client.camera
+        try:
+            fov, aspect = float(camera.fov), float(camera.image_width) / max(float(camera.image_height), 1.0)
+        except AssertionError:  # the browser has not reported its camera yet: frame once it has
+            self._frame_when_ready = (data, compare)
+            if not self._waiting_for_camera:
+                self._waiting_for_camera = True
+                camera.on_update(lambda _: self._frame_pending())
+            return
+        tan_v = np.tan(fov / 2)
+        distance = radius / (0.9 * min(tan_v, tan_v * aspect))
+        camera.look_at = tuple(float(v) for v in centre)
+        camera.position = tuple(float(v) for v in centre + np.asarray(VIEW_DIRECTION) * distance)
+
+    def _frame_pending(self) -> None:
+        pending, self._frame_when_ready = self._frame_when_ready, None
+        if pending is not None and pending[0] is self.data:
+            self._frame(*pending)
+
     # -- the scrub step -----------------------------------------------------------------------
     def set_step(self, step: int, limit_text: list[str] | None = None) -> None:
-        """Pose every arm at ``step``, move the trail to its chunk, show joints over their limits.
+        """Pose every arm at ``step``, move the trail to its chunk, mark joints over their limits.
 
         Args:
             step: global executed step (already clamped).
-            limit_text: per joint, the label to show when that joint is past its limit at this step
-                ("" = within limits).
+            limit_text: per joint, non-empty when that joint is past its limit at this step (the
+                words are listed by the tab's readout; the scene marks the joint with a red sphere).
         """
         data = self.data
         if data is None:
@@ -208,17 +243,11 @@ class TabScene:
             self._draw_trail(chunk)
         for j, text in enumerate(limit_text or [""] * len(JOINT_NAMES)):
             on = bool(text)
-            sphere, label = self._limit_spheres[j], self._limit_labels[j]
+            sphere = self._limit_spheres[j]
             if on:
-                pos = tuple(data.joint_pos[step, j])
-                sphere.position = pos
-                label.position = pos
-                if text != self._limit_text[j]:
-                    label.text = text
+                sphere.position = tuple(data.joint_pos[step, j])
             if sphere.visible != on:
                 sphere.visible = on
-                label.visible = on
-            self._limit_text[j] = text
 
     def _draw_trail(self, chunk: int) -> None:
         """Replace the horizon trail by chunk ``chunk``'s (executed part set apart)."""
@@ -229,16 +258,18 @@ class TabScene:
             node.remove()
         pts = data.trail[chunk]
         e = min(data.executed, len(pts))
+        # executed steps: a thick dark line with large dots; the rest of the horizon: thin and light
+        colors = np.where(data.trail_violation[chunk][:, None], np.array(LIMIT_RGB),
+                          np.where(np.arange(len(pts))[:, None] < e, np.array(EXECUTED_RGB),
+                                   np.array(HORIZON_RGB))).astype(np.uint8)
         self._trail = [
             scene.add_line_segments("/trail/executed", _path_segments(pts[:e]), EXECUTED_RGB,
-                                    thickness=5.0, thickness_units="screen"),
-            scene.add_point_cloud("/trail/points", pts.astype(np.float32),
-                                  colors=np.where(data.trail_violation[chunk][:, None],
-                                                  np.array(LIMIT_RGB), np.array(HORIZON_RGB)).astype(np.uint8),
-                                  point_size=0.005, point_shape="circle"),
+                                    thickness=6.0, thickness_units="screen"),
+            scene.add_point_cloud("/trail/points", pts.astype(np.float32), colors=colors,
+                                  point_size=0.006, point_shape="circle"),
         ]
         if e < len(pts):
             self._trail.append(scene.add_line_segments(
                 "/trail/predicted", _path_segments(pts[e - 1:] if e > 0 else pts), HORIZON_RGB,
-                thickness=2.0, thickness_units="screen"))
+                thickness=1.5, thickness_units="screen"))
         self._trail_chunk = chunk

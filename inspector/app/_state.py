@@ -42,6 +42,7 @@ if TYPE_CHECKING:
     from ._server import InspectorApp
 
 PLAYBACK_FPS = 30.0
+LEFT_PANEL_PX, RIGHT_PANEL_PX = 350, 640
 NOTES_NEED_A_SESSION = ("<div style='font-size:0.75rem;color:#6b7280'>Notes are kept in a session's "
                         "annotations.json; a dataset's episodes have none (the dataset is never written to)."
                         "</div>")
@@ -75,6 +76,7 @@ class TabState:
         self.playing = False
         self.speed = 1.0
         self.pairs: list[FramePair] = []
+        self.compare_pairs: dict[str, FramePair] = {}  # view -> the compared rollout's frames
         self.export_result: str | None = None  # what the last export did (for tests and logs)
         self._play_generation = 0
         self._video_html = ""
@@ -94,9 +96,9 @@ class TabState:
                 self.video = VideoPanel(gui)
                 self.plots = PlotPanel(gui)
             gui.main_panel.dock_left()
-            gui.main_panel.set_width(350)
+            gui.main_panel.set_width(LEFT_PANEL_PX)
             self.right_panel.dock_right()
-            self.right_panel.set_width(600)
+            self.right_panel.set_width(RIGHT_PANEL_PX)
         try:
             robot = app.robot()  # waits for the shared meshes on the first tab
             self.robot_note = robot.fallback_reason or ""
@@ -136,6 +138,8 @@ class TabState:
             if self.compare_key == key:
                 self.compare_key, self.compare = None, None
                 self._set_quietly(self.controls.compare, NO_COMPARE)
+            elif self.compare is not None:
+                self.compare.frames.add_listener(self._listener)
             with self.client.atomic():
                 self._show_loaded()
                 self.step = -1
@@ -144,8 +148,11 @@ class TabState:
             return True
 
     def set_compare(self, key: str | None) -> bool:
-        """Compare with rollout ``key`` (None to stop): its arm, path, joints and the divergence."""
+        """Compare with rollout ``key`` (None to stop): its arm, path, joints, imagined frames and
+        the divergence."""
         with self.lock:
+            if self.compare is not None:
+                self.compare.frames.remove_listener(self._listener)
             if key is None or key == self.key or self.app.catalog.get(key) is None:
                 self.compare_key, self.compare = None, None
                 self.controls.compare_info.content = ""
@@ -154,6 +161,7 @@ class TabState:
                 try:
                     self.compare = self.app.catalog.load(key)
                     self.compare_key = key
+                    self.compare.frames.add_listener(self._listener)  # its frames arriving redraw too
                     ok = True
                 except Exception as exc:
                     self.compare_key, self.compare = None, None
@@ -167,8 +175,9 @@ class TabState:
             return ok
 
     def _detach(self) -> None:
-        if self.loaded is not None:
-            self.loaded.frames.remove_listener(self._listener)
+        for loaded in (self.loaded, self.compare):
+            if loaded is not None:
+                loaded.frames.remove_listener(self._listener)
 
     def _show_error(self, tag: str, exc: BaseException) -> None:
         c = self.controls
@@ -199,6 +208,7 @@ class TabState:
         # one chunk (a single-chunk sample, an episode): no chunk slider or chunk buttons
         c.chunk.visible = c.nav.visible = tl.n_chunks > 1
         cmp = self.compare
+        self.video.set_views(loaded.frames.views)
         self.scene.show(loaded.scene, cmp.scene if cmp is not None else None)
         self.plots.build(tl, cmp.timeline if cmp is not None else None, loaded.frames.psnr)
         self._refresh_compare_info()
@@ -311,8 +321,15 @@ class TabState:
         loaded = self.loaded
         assert loaded is not None
         tl = loaded.timeline
-        self.pairs = [loaded.frames.pair(v, self.step) for v in loaded.frames.views]
-        html = video_grid(self.pairs, self.step, float(tl.t_s[self.step]))
+        shown = [v for v in loaded.frames.views if self.video.selected in (None, v)]
+        self.pairs = [loaded.frames.pair(v, self.step) for v in shown]
+        cmp = self.compare
+        self.compare_pairs = {}
+        if cmp is not None:
+            cmp_step = min(self.step, cmp.timeline.n_steps - 1)
+            self.compare_pairs = {v: cmp.frames.pair(v, cmp_step) for v in shown if v in cmp.frames.imagined_views}
+        html = video_grid(self.pairs, self.step, float(tl.t_s[self.step]), self.compare_pairs,
+                          cmp.timeline.tag if cmp is not None else None, large=self.video.selected is not None)
         if html != self._video_html:  # the GT frame often stays while the imagined one moves
             self._video_html = html
             self.video.html.content = html
@@ -328,9 +345,9 @@ class TabState:
         if tl.post_episode is not None and tl.post_episode[step] or (
                 tl.episode_end_step is not None and step >= tl.episode_end_step):
             notes.append("<span style='color:#c92a2a'>past the real episode's end</span>")
-        over = [j for j, v in zip(JOINT_NAMES, tl.limit_violation[step]) if v]
+        over = [t for t in self._limit_text(step) if t]
         if over:
-            notes.append(f"<span style='color:#c92a2a'>over limit: {', '.join(over)}</span>")
+            notes.append(f"<span style='color:#c92a2a'>{esc(' · '.join(over))}</span>")
         if tl.time_aligned_drift is not None:
             u = unit(tl)
             best = f" (best-match {tl.best_match_drift[step]:.1f}{u})" if tl.best_match_drift is not None else ""
@@ -555,6 +572,7 @@ class TabState:
             return cb
 
         c.picker.on_update(user(lambda e: self._picked(e.target.value)))
+        self.video.view.on_update(user(lambda e: self._redraw_video()))
         # Slider callbacks may run out of order on the pool: read the latest value, not the event's.
         c.chunk.on_update(user(lambda e: self._slider_moved(c.chunk)))
         c.step_in_chunk.on_update(user(lambda e: self._slider_moved(c.step_in_chunk)))
@@ -596,6 +614,11 @@ class TabState:
                 self.set_chunk(int(c.chunk.value), source=slider)
             else:
                 self.set_chunk(self.chunk, int(c.step_in_chunk.value), source=slider)
+
+    def _redraw_video(self) -> None:
+        with self.lock:
+            if self.loaded is not None:
+                self._render_video()
 
     def _show_joint(self, joint: str) -> None:
         with self.lock:
