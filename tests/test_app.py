@@ -199,8 +199,49 @@ def test_compare_mode(app):
         assert tab.compare is not None and tab.scene.cmp_arm is not None and tab.scene.cmp_arm.visible
         assert len(tab.plots.plots) == n_plots + 1  # the divergence plot
         assert "ep000_novel" in tab.controls.compare_info.content
-        tab.set_step(300)
+        # the compared rollout's imagined frames sit beside the open one's, view by view
+        assert tab.compare.frames.decoded.wait(120)
+        tab.set_step(300, force=True)
+        assert set(tab.compare_pairs) == {"front", "gripper", "top"}
+        assert all(p.imagined and p.imagined_index == 300 for p in tab.compare_pairs.values())
+        html = tab.video.html.content
+        assert html.count("data-kind='compare'") == 3 and "ep000_novel · imagined" in html
         assert tab.set_compare(None) and not tab.scene.cmp_arm.visible
+        tab.set_step(301, force=True)
+        assert tab.compare_pairs == {} and "data-kind='compare'" not in tab.video.html.content
+
+
+def test_view_selector_shows_one_view_large(app):
+    client, tab = connect(app)
+    with client:
+        tab.open(key(app, "ep000_train"))
+        assert tab.loaded.frames.decoded.wait(120)
+        assert tab.video.view.options == ("all views", "front", "gripper", "top")
+        tab.video.view.value = "top"
+        tab._redraw_video()
+        assert [p.view for p in tab.pairs] == ["top"]
+        assert "repeat(1," in tab.video.html.content  # stacked, full width
+
+
+def test_one_chunk_has_no_chunk_controls_and_the_camera_frames_the_scene(app):
+    client, tab = connect(app)
+    with client:
+        tab.open(key(app, "f084"))  # a single chunk
+        assert not tab.controls.chunk.visible and not tab.controls.nav.visible
+        assert tab.controls.step_in_chunk.label == "Step" and tab.controls.step_in_chunk.max == 23
+        assert "chunk" not in tab.controls.readout.content.split("<br>")[0]
+        tab.open(key(app, "ep000_train"))
+        assert tab.controls.chunk.visible and tab.controls.chunk.max == 59
+        # the camera looks at the middle of what is drawn, from far enough to see all of it
+        scene = tab.loaded.scene
+        pts = np.concatenate([scene.joint_pos.reshape(-1, 3), scene.ee_pred])
+        look = np.array(client_camera(tab).look_at)
+        assert np.all(look > pts.min(axis=0) - 0.05) and np.all(look < pts.max(axis=0) + 0.05)
+        assert np.linalg.norm(np.array(client_camera(tab).position) - look) > 0.3
+
+
+def client_camera(tab):
+    return tab.client.camera
 
 
 def test_playback_advances_and_stops(app):

@@ -584,3 +584,61 @@ def test_viewer_draws_both_arms(synthetic_export, tmp_path):
     finally:
         viewer.terminate()
         viewer.wait(10)
+
+
+# ----------------------------------------------------------------------------------------------
+# Layout: what a researcher sees when the file opens
+
+
+def test_the_3d_view_frames_every_path(fixture_export):
+    """Every predicted tool point and every chunk's horizon lies inside the viewer's field of view
+    from the recording's eye (the prediction used to run off the top)."""
+    from inspector.export import eye_fitting
+
+    tl, _, _, _ = fixture_export
+    eye, target = (np.array(v) for v in eye_fitting(tl))
+    axis = (target - eye) / np.linalg.norm(target - eye)
+    trail = kinematics().gripper_positions(tl.chunks.reshape(-1, 6), tl.units)
+    for pts in (tl.ee_pred, trail):
+        rays = pts - eye
+        angle = np.degrees(np.arccos(np.clip(rays @ axis / np.linalg.norm(rays, axis=1), -1, 1)))
+        assert np.percentile(angle, 99) < 27.5, np.percentile(angle, 99)
+
+
+def test_blueprint_titles_and_layout():
+    import rerun.blueprint as rrb
+
+    no_gt = L.build_blueprint(L.Contents(views={"front": (True, False)}, gt_joints=False))
+    episode = L.build_blueprint(L.Contents(views={"front": (False, True)}, gt_joints=True,
+                                           pred_name="commanded (action)", gt_name="measured (state)",
+                                           chunks=False))
+
+    def views(node):
+        for child in getattr(node, "contents", None) or []:
+            if isinstance(child, rrb.View):
+                yield child
+            else:
+                yield from views(child)
+
+    def names(bp):
+        return [v.name for v in views(bp.root_container)]
+
+    assert "Arm: predicted (no GT joints)" in names(no_gt)
+    assert "Arms: measured (state) (opaque) vs commanded (action) (translucent)" in names(episode)
+    assert "Chunk RMSE" not in names(episode) and "front camera" in names(episode)
+    joints = next(c for c in _containers(no_gt.root_container) if getattr(c, "name", None) == "Joints")
+    assert joints.grid_columns == 2  # joint names are not cut short
+
+
+def _containers(node):
+    for child in getattr(node, "contents", None) or []:
+        if not hasattr(child, "origin"):
+            yield child
+            yield from _containers(child)
+
+
+def test_chunk_starts_are_events_not_plot_markers(synthetic_export):
+    _, _, rec = synthetic_export
+    assert not [e for e in rec.entities if "chunk_start" in e]
+    texts = rec.temporal(L.EVENTS, "TextLog:text")[1]
+    assert any("chunk 1 starts" in str(t) for t in texts)

@@ -176,3 +176,20 @@ def test_every_public_name_resolves():
         assert name == "JOINT_NAMES" or value.__name__ == name
     with pytest.raises(AttributeError):
         inspector.not_a_name  # noqa: B018
+
+
+def test_info_on_a_session_says_model_units_and_gt(tmp_path):
+    import subprocess
+    import sys
+
+    root = _write_small_session(tmp_path / "s")
+    out = subprocess.run([sys.executable, "-m", "inspector", "info", str(root)], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.splitlines()
+    assert lines[1] == "model: m" and lines[2].startswith("units: arm degrees")
+    assert lines[3].startswith("GT source: ")
+    single = next(line for line in lines if line.startswith("b "))
+    assert " single_chunk " in single and " - " in single  # no "executed" for a single chunk
+    version = subprocess.run([sys.executable, "-m", "inspector", "--version"], capture_output=True, text=True)
+    assert version.returncode == 0 and version.stdout.startswith("inspector ")

@@ -211,8 +211,9 @@ class TabScene:
             return
         tan_v = np.tan(fov / 2)
         distance = radius / (0.9 * min(tan_v, tan_v * aspect))
-        camera.look_at = tuple(float(v) for v in centre)
+        # position first: viser moves the look-at point along with a new position
         camera.position = tuple(float(v) for v in centre + np.asarray(VIEW_DIRECTION) * distance)
+        camera.look_at = tuple(float(v) for v in centre)
 
     def _frame_pending(self) -> None:
         pending, self._frame_when_ready = self._frame_when_ready, None
