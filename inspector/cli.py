@@ -51,6 +51,10 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
     report = build_report(args.paths, dataset=args.dataset, jobs=args.jobs, use_cache=not args.no_cache,
                           limit_margin_deg=args.limit_margin)
+    if args.html:
+        from .report_html import write_report_html
+
+        print(f"wrote {write_report_html(report, args.html, sources=args.paths)}", file=sys.stderr)
     print(json.dumps(report, indent=2) if args.json else format_report(report))
     return 0
 
@@ -147,6 +151,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="worker processes (default: one per core; 1 computes in this process)")
     p.add_argument("--no-cache", action="store_true",
                    help="neither read nor write the metrics cache ($INSPECTOR_CACHE_DIR, else ~/.cache/inspector)")
+    p.add_argument("--html", metavar="OUT.html",
+                   help="also write one self-contained page (tables, figures; opens offline)")
     _limit_margin_argument(p)
     p.set_defaults(func=_cmd_report)
 
