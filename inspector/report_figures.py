@@ -8,16 +8,17 @@ They reproduce the DreamZero-SO101 report's figures from raw outputs:
 - **time-aligned drift per chunk** of every autoregressive rollout on one plot, each episode's end
   marked, **best-match drift** beside it.
 
-Each figure has a data function (plain numbers, what a test or another view checks) and a
-function drawing it as inline SVG (:mod:`inspector.svg_plot`). Rows are identified by their index
-in the list given (``key``), which the HTML report uses to link a curve to its table row.
+Each figure (:data:`FIGURES`) has a data function (plain numbers, what a test or another view
+checks) and a function drawing it as inline SVG (:mod:`inspector.svg_plot`), which any page that
+holds HTML can show. Rows are identified by their index in the list given (``key``), which the
+HTML report uses to link a curve to its table row.
 """
 
 from __future__ import annotations
 
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -97,14 +98,7 @@ def per_step_rmse(rows: Sequence[Row]) -> dict[str, Any] | None:
             "n_other_horizon": len(samples) - len(used)}
 
 
-def per_step_rmse_figure(rows: Sequence[Row]) -> Figure:
-    data = per_step_rmse(rows)
-    fig = Figure("per-step-rmse", "Per-step RMSE over the horizon",
-                 "RMSE over the 6 joints at each step of the predicted chunk (sqrt of per-step MSE), "
-                 "for every single-chunk sample: each sample, their mean, and min..max over samples.")
-    if data is None:
-        fig.note = "no single-chunk samples with GT joints"
-        return fig
+def _draw_per_step_rmse(fig: Figure, rows: Sequence[Row], data: dict[str, Any]) -> None:
     per_sample = data["per_sample"]
     steps = np.arange(per_sample.shape[1])
     ax = Axes(x_label="step in chunk", y_label="RMSE [deg]", y_min=0, x_min=0, x_max=float(steps[-1]))
@@ -123,7 +117,6 @@ def per_step_rmse_figure(rows: Sequence[Row]) -> Figure:
     fig.legend = ax.legend
     if data["n_other_horizon"]:
         fig.note = f"{data['n_other_horizon']} sample(s) with another horizon left out"
-    return fig
 
 
 # ----------------------------------------------------------------------------------------------
@@ -147,14 +140,7 @@ def rmse_by_position(rows: Sequence[Row]) -> dict[str, Any] | None:
             "rmse": np.array([r["rmse_deg"] for _, r in samples], dtype=np.float64), "relative": relative}
 
 
-def rmse_by_position_figure(rows: Sequence[Row]) -> Figure:
-    data = rmse_by_position(rows)
-    fig = Figure("rmse-by-position", "RMSE against position in the episode",
-                 "Chunk RMSE of every single-chunk sample against its start frame / episode length "
-                 "(the start frame itself when an episode's length is unknown); colour: session.")
-    if data is None:
-        fig.note = "no single-chunk samples with GT joints"
-        return fig
+def _draw_rmse_by_position(fig: Figure, rows: Sequence[Row], data: dict[str, Any]) -> None:
     sessions = sorted({str(rows[k].get("session")) for k in data["keys"]})
     rel = data["relative"]
     ax = Axes(x_label="start frame / episode length" if rel else "start frame", y_label="chunk RMSE [deg]",
@@ -172,7 +158,6 @@ def rmse_by_position_figure(rows: Sequence[Row]) -> Figure:
     fig.legend = ax.legend
     if not rel:
         fig.note = "episode lengths unknown for some samples: x is the start frame"
-    return fig
 
 
 # ----------------------------------------------------------------------------------------------
@@ -205,14 +190,7 @@ def joint_overlay(rows: Sequence[Row]) -> dict[str, Any] | None:
     return {"keys": [i for i, _ in samples], "pred": pred, "gt": gt, "n_total": n_total}
 
 
-def joint_overlay_figure(rows: Sequence[Row]) -> Figure:
-    data = joint_overlay(rows)
-    fig = Figure("joint-overlay", "Per-joint predicted vs GT",
-                 "Each single-chunk sample's predicted joints (solid) and GT (dashed, same colour) "
-                 "over the predicted horizon, one panel per joint.")
-    if data is None:
-        fig.note = "no single-chunk samples"
-        return fig
+def _draw_joint_overlay(fig: Figure, rows: Sequence[Row], data: dict[str, Any]) -> None:
     sessions = _n_sessions(rows)
     steps = np.arange(data["pred"].shape[1])
     for joint, name in enumerate(JOINT_NAMES):
@@ -231,7 +209,6 @@ def joint_overlay_figure(rows: Sequence[Row]) -> Figure:
             fig.legend = ax.legend + [("c7 gt", "GT", "dash", None)]
     if data["n_total"] > len(data["keys"]):
         fig.note = f"{len(data['keys'])} of {data['n_total']} samples shown, evenly spread over the table's order"
-    return fig
 
 
 # ----------------------------------------------------------------------------------------------
@@ -302,27 +279,76 @@ def _drift_panel(rows: Sequence[Row], data: dict[str, Any], name: str) -> tuple[
     return Panel(ax.svg(), name), ax.legend
 
 
-def drift_figure(rows: Sequence[Row]) -> Figure:
-    fig = Figure("drift", "Drift per chunk of autoregressive rollouts",
-                 "Time-aligned drift d(pred(t), gt(t)) and, beside it, best-match drift "
-                 "min_j d(pred(t), gt_j) (speed-invariant), averaged over each chunk's executed steps "
-                 "[data units]. Vertical lines: each episode's end; dashed: post-episode chunks "
-                 "(compared with the episode's last frame).")
-    time_aligned = drift_curves(rows, "time_aligned_drift")
-    best = drift_curves(rows, "best_match_drift")
-    if time_aligned is None or best is None:
-        n_auto = sum(r["kind"] == "autoregressive" for r in rows)
-        fig.note = (f"{n_auto} autoregressive rollout(s), none with GT joints "
-                    "(give the GT dataset with --dataset to measure drift)" if n_auto
-                    else "no autoregressive rollouts")
-        return fig
-    panel, fig.legend = _drift_panel(rows, time_aligned, "time-aligned")
+def _drift_data(rows: Sequence[Row]) -> tuple[dict[str, Any], dict[str, Any]] | None:
+    """Time-aligned and best-match :func:`drift_curves` (None without GT joints)."""
+    time_aligned, best = drift_curves(rows, "time_aligned_drift"), drift_curves(rows, "best_match_drift")
+    return None if time_aligned is None or best is None else (time_aligned, best)
+
+
+def _no_drift(rows: Sequence[Row]) -> str:
+    n_auto = sum(r["kind"] == "autoregressive" for r in rows)
+    if not n_auto:
+        return "no autoregressive rollouts"
+    return f"{n_auto} autoregressive rollout(s), none with GT joints (give the GT dataset with --dataset to measure drift)"
+
+
+def _draw_drift(fig: Figure, rows: Sequence[Row], data: tuple[dict[str, Any], dict[str, Any]]) -> None:
+    panel, fig.legend = _drift_panel(rows, data[0], "time-aligned")
     fig.panels.append(panel)
-    fig.panels.append(_drift_panel(rows, best, "best-match")[0])
-    return fig
+    fig.panels.append(_drift_panel(rows, data[1], "best-match")[0])
+
+
+# ----------------------------------------------------------------------------------------------
+# All of them
+
+
+@dataclass(frozen=True)
+class _Spec:
+    """A figure: what it is, its data function (None: nothing to draw), how it draws, and what
+    it says when there is nothing to draw."""
+
+    key: str
+    title: str
+    caption: str
+    data: Callable[[Sequence[Row]], Any]
+    draw: Callable[[Figure, Sequence[Row], Any], None]
+    empty: Callable[[Sequence[Row]], str]
+
+
+def _say(text: str) -> Callable[[Sequence[Row]], str]:
+    return lambda rows: text
+
+
+FIGURES = [
+    _Spec("per-step-rmse", "Per-step RMSE over the horizon",
+          "RMSE over the 6 joints at each step of the predicted chunk (sqrt of per-step MSE), for every "
+          "single-chunk sample: each sample, their mean, and min..max over samples.",
+          per_step_rmse, _draw_per_step_rmse, _say("no single-chunk samples with GT joints")),
+    _Spec("rmse-by-position", "RMSE against position in the episode",
+          "Chunk RMSE of every single-chunk sample against its start frame / episode length (the start "
+          "frame itself when an episode's length is unknown); colour: session.",
+          rmse_by_position, _draw_rmse_by_position, _say("no single-chunk samples with GT joints")),
+    _Spec("joint-overlay", "Per-joint predicted vs GT",
+          "Each single-chunk sample's predicted joints (solid) and GT (dashed, same colour) over the "
+          "predicted horizon, one panel per joint.",
+          joint_overlay, _draw_joint_overlay, _say("no single-chunk samples")),
+    _Spec("drift", "Drift per chunk of autoregressive rollouts",
+          "Time-aligned drift d(pred(t), gt(t)) and, beside it, best-match drift min_j d(pred(t), gt_j) "
+          "(speed-invariant), averaged over each chunk's executed steps [data units]. Vertical lines: "
+          "each episode's end; dashed: post-episode chunks (compared with the episode's last frame).",
+          _drift_data, _draw_drift, _no_drift),
+]
 
 
 def report_figures(rows: Sequence[Row]) -> list[Figure]:
-    """Every aggregate figure of a report's rows, in reading order."""
-    return [per_step_rmse_figure(rows), rmse_by_position_figure(rows), joint_overlay_figure(rows),
-            drift_figure(rows)]
+    """Every aggregate figure of a report's rows, in reading order (see :data:`FIGURES`)."""
+    figures = []
+    for spec in FIGURES:
+        fig = Figure(spec.key, spec.title, spec.caption)
+        data = spec.data(rows)
+        if data is None:
+            fig.note = spec.empty(rows)
+        else:
+            spec.draw(fig, rows, data)
+        figures.append(fig)
+    return figures
