@@ -30,6 +30,8 @@ Row = dict[str, Any]
 MAX_LEGEND = N_COLOURS
 # Single-chunk samples in the joint overlay (each in its own colour).
 MAX_OVERLAY_SAMPLES = N_COLOURS
+# Episode ends labelled in a drift plot (more are drawn unlabelled).
+MAX_END_LABELS = 6
 
 
 @dataclass
@@ -257,8 +259,9 @@ def _drift_panel(rows: Sequence[Row], data: dict[str, Any], name: str) -> tuple[
     """The panel of one drift metric and its legend entries."""
     n, sessions = len(data["keys"]), _n_sessions(rows)
     ax = Axes(x_label="chunks executed", y_label=f"{name} drift [deg]", y_min=0, x_min=0)
+    labelled = len(data["ends"]) <= MAX_END_LABELS
     for x, labels in sorted(data["ends"].items()):
-        ax.vline(x, "end", label=", ".join(labels[:2]) + (" ..." if len(labels) > 2 else ""))
+        ax.vline(x, "end", label=", ".join(labels[:2]) + (" ..." if len(labels) > 2 else "") if labelled else None)
     for j, (key, x, y, k_in) in enumerate(zip(data["keys"], data["x"], data["y"], data["inside"])):
         r = rows[key]
         few = n <= MAX_LEGEND
