@@ -1,4 +1,4 @@
-"""``inspector`` command line: import, info, report, serve, export, demo.
+"""``inspector`` command line: import, info, report, compare, serve, export, demo.
 
 Bad input ends with exit code 2 and one line ``error: <file>: <what is wrong>``, never a traceback.
 What counts as bad input, per command:
@@ -10,6 +10,7 @@ What counts as bad input, per command:
   listed under ``errors`` with exit 0 (info is how one finds out what is broken).
 - ``report``: exit 2 when a path is unusable or nothing could be reported (no rollouts, or every one
   broken); otherwise exit 0, broken rollouts listed under ``errors``.
+- ``compare``: as ``report`` for each side, and exit 2 when no rollout of A pairs with one of B.
 - ``export``: writes every rollout it can; each broken one prints its own ``error:`` line, leaves no
   file, and makes the exit code 2.
 """
@@ -50,7 +51,20 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
     report = build_report(args.paths, dataset=args.dataset, jobs=args.jobs, use_cache=not args.no_cache,
                           limit_margin_deg=args.limit_margin)
+    if args.html:
+        from .report_html import write_report_html
+
+        print(f"wrote {write_report_html(report, args.html, sources=args.paths)}", file=sys.stderr)
     print(json.dumps(report, indent=2) if args.json else format_report(report))
+    return 0
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from .compare import build_comparison, format_comparison
+
+    comparison = build_comparison(args.a, args.b, dataset=args.dataset, jobs=args.jobs,
+                                  use_cache=not args.no_cache, limit_margin_deg=args.limit_margin)
+    print(json.dumps(comparison, indent=2) if args.json else format_comparison(comparison))
     return 0
 
 
@@ -149,8 +163,21 @@ def build_parser() -> argparse.ArgumentParser:
                    help="worker processes (default: one per core; 1 computes in this process)")
     p.add_argument("--no-cache", action="store_true",
                    help="neither read nor write the metrics cache ($INSPECTOR_CACHE_DIR, else ~/.cache/inspector)")
+    p.add_argument("--html", metavar="OUT.html",
+                   help="also write one self-contained page (tables, figures; opens offline)")
     _limit_margin_argument(p)
     p.set_defaults(func=_cmd_report)
+
+    p = sub.add_parser("compare", help="two evaluations rollout by rollout (e.g. two checkpoints)")
+    p.add_argument("a", help="session, rollout or DreamZero-SO101 source dir (A)")
+    p.add_argument("b", help="the same for B; deltas are B - A")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
+    p.add_argument("--jobs", "-j", type=_positive_int, default=None,
+                   help="worker processes (default: one per core; 1 computes in this process)")
+    p.add_argument("--no-cache", action="store_true", help="neither read nor write the metrics cache")
+    _limit_margin_argument(p)
+    p.set_defaults(func=_cmd_compare)
 
     p = sub.add_parser("serve", help="the web app (default: the bundled demo session)")
     p.add_argument("paths", nargs="*", help="sessions, rollouts, DreamZero-SO101 source dirs or LeRobot "

@@ -62,6 +62,9 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> d
         ee = {"mean": float(inside.mean()), "final": float(inside[-1])}
     psnr = {view: vm.mean_psnr_db for view, vm in sorted(video.items()) if vm.mean_psnr_db is not None}
     worst, worst_by = tl.worst_chunk()
+    episode_length = None
+    if tl.gt.episode_length is not None:  # counted from the rollout's step 0: back to the episode's start
+        episode_length = int(tl.gt.episode_length - tl.gt.offset + r.start_frame)
     return {
         "tag": r.tag,
         "session": r.session.name if r.session is not None else None,
@@ -71,6 +74,8 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> d
         "start_frame": r.start_frame,
         "units": tl.units.label(),
         "n_chunks": tl.n_chunks,
+        "steps_per_chunk": tl.steps_per_chunk,
+        "episode_length": episode_length,
         "rmse_deg": ce.rmse if ce is not None else None,
         "per_joint_rmse": ce.per_joint_rmse.tolist() if ce is not None else None,
         "per_step_mse": ce.per_step_mse.tolist() if ce is not None else None,
@@ -85,7 +90,25 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> d
         "post_episode_chunks": post_chunks,
         "gt_source": tl.gt.source,
         "gt_warning": tl.gt.warning,
+        "chunk_joints": _chunk_joints(tl),
     }
+
+
+def _chunk_joints(tl: RolloutTimeline) -> dict[str, Any] | None:
+    """A single chunk's predicted and GT joints, (H, 6) each (GT null without GT joints, a step
+    null past the episode's end), for the overlay figures; null for autoregressive rollouts, whose
+    rows stay small."""
+    if tl.n_chunks != 1:
+        return None
+    gt = None
+    if tl.gt_aligned is not None:
+        inside = ~tl.post_episode if tl.post_episode is not None else np.ones(tl.n_steps, bool)
+        gt = [_rounded(q) if ok else None for q, ok in zip(tl.gt_aligned, inside)]
+    return {"pred": [_rounded(q) for q in tl.pred], "gt": gt}
+
+
+def _rounded(q: np.ndarray) -> list[float]:
+    return [round(float(v), 4) for v in q]
 
 
 def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
