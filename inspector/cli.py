@@ -49,7 +49,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
     from .report import build_report, format_report
 
     report = build_report(args.paths, dataset=args.dataset, jobs=args.jobs, use_cache=not args.no_cache,
-                          limit_margin_deg=args.limit_margin)
+                          limit_margin_deg=args.limit_margin, ray=args.ray)
     print(json.dumps(report, indent=2) if args.json else format_report(report))
     return 0
 
@@ -108,6 +108,13 @@ def _limit_margin_argument(p: argparse.ArgumentParser) -> None:
                         f"(default {DEFAULT_LIMIT_MARGIN_DEG:g} deg)")
 
 
+def _ray_argument(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
+                   help=f"{what} as Ray tasks: a local Ray instance, or the cluster at ADDRESS (auto, "
+                        "HOST:PORT, ray://HOST:PORT); sessions must be on storage every node reads at "
+                        "the same path (needs pip install 'inspector[ray]')")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="inspector",
@@ -134,9 +141,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
     p.add_argument("--jobs", "-j", type=_positive_int, default=None,
-                   help="worker processes (default: one per core; 1 computes in this process)")
+                   help="worker processes (default: one per core; 1 computes in this process); with "
+                        "--ray, the local Ray instance's CPUs or a cluster's tasks at once")
     p.add_argument("--no-cache", action="store_true",
                    help="neither read nor write the metrics cache ($INSPECTOR_CACHE_DIR, else ~/.cache/inspector)")
+    _ray_argument(p, "compute the rollouts")
     _limit_margin_argument(p)
     p.set_defaults(func=_cmd_report)
 
