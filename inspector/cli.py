@@ -66,7 +66,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
     from .export import export_cli
 
     return export_cli(args.path, args.output, rollout=args.rollout, views=args.views,
-                      dataset=args.dataset, use_cache=not args.no_cache, limit_margin_deg=args.limit_margin)
+                      dataset=args.dataset, use_cache=not args.no_cache, limit_margin_deg=args.limit_margin,
+                      ray=args.ray)
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -168,6 +169,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--views", nargs="*", help="camera views to include (default: all)")
     p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the metrics cache")
+    _ray_argument(p, "write the recordings")
     _limit_margin_argument(p)
     p.set_defaults(func=_cmd_export)
 
