@@ -26,7 +26,7 @@ import re
 import socket
 import sys
 import warnings
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, replace
 from typing import Any, Callable, Iterable, Iterator, Sequence, TypeVar
 
@@ -113,7 +113,8 @@ class RayWorkers:
                 submit()
         finally:
             for ref in pending:  # stopped early (an error, Ctrl-C): the cluster need not go on
-                ray.cancel(ref, force=True)
+                with suppress(Exception):  # never hide why it stopped
+                    ray.cancel(ref, force=True)
 
 
 @contextmanager
