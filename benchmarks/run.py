@@ -224,6 +224,43 @@ def _eval_session(tmp: Path, name: str, n: int, video: bool) -> Path:
 
 
 # ----------------------------------------------------------------------------------------------
+# inspector report --ray (whole process, Ray's startup included)
+
+
+def bench_ray(tmp: Path, quick: bool) -> list[Figure]:
+    """``report --ray`` on a local Ray instance of 1 and 2 CPUs against ``--jobs 1`` and ``--jobs 2``
+    on the same 200 rollouts with two views, each run with a fresh metrics cache, then both paths
+    again on a warm cache (what is left is Ray's fixed cost: starting and stopping the instance)."""
+    import importlib.util
+
+    if importlib.util.find_spec("ray") is None:
+        print("  ray: skipped (pip install -e '.[ray]')", file=sys.stderr)
+        return []
+    n = 60 if quick else 200
+    video = _eval_session(tmp, "video", n, video=True)
+    quiet = {"RAY_USAGE_STATS_ENABLED": "0"}
+    figures, outputs = [], []
+    warm = fresh_cache(tmp)  # filled by the cold --jobs 2 run, read by the warm pair
+    for cpus in (2, 1):
+        local = run_process(inspector_cmd("report", video, "--json", "--jobs", cpus),
+                            env=warm if cpus == 2 else fresh_cache(tmp))
+        on_ray = run_process(inspector_cmd("report", video, "--json", "--ray", "--jobs", cpus),
+                             env={**fresh_cache(tmp), **quiet})
+        outputs += [local.stdout, on_ray.stdout]
+        figures.append(Figure(f"ray_{cpus}cpu_{n}_video", on_ray.wall_s, "s", "Ray <= 1.25x --jobs",
+                              on_ray.wall_s <= 1.25 * local.wall_s, on_ray.peak_mib, local.wall_s, local.peak_mib,
+                              f"local Ray instance of {cpus} CPU(s) vs --jobs {cpus}, cold cache, whole process"))
+    warm_local = run_process(inspector_cmd("report", video, "--json", "--jobs", 2), env=warm)
+    warm_ray = run_process(inspector_cmd("report", video, "--json", "--ray", "--jobs", 2), env={**warm, **quiet})
+    figures.append(Figure("ray_fixed_cost", warm_ray.wall_s, "s", "report only", True, warm_ray.peak_mib,
+                          warm_local.wall_s, warm_local.peak_mib,
+                          "warm metrics cache (no decoding): Ray's start and stop vs the local pool's"))
+    if any(json.loads(out) != json.loads(outputs[0]) for out in outputs + [warm_ray.stdout]):
+        raise AssertionError("report --ray differs from the local report")
+    return figures
+
+
+# ----------------------------------------------------------------------------------------------
 # inspector export (whole process)
 
 
@@ -441,7 +478,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="smaller counts, fewer repetitions")
     parser.add_argument("--json", type=Path, help="also write the figures as JSON")
-    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export open scrub serve")
+    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve")
     args = parser.parse_args(argv)
 
     figures: list[Figure] = []
@@ -452,6 +489,7 @@ def main(argv: list[str] | None = None) -> int:
             ("fk", lambda: bench_fk(args.quick)),
             ("report", lambda: bench_report(tmp, args.quick)),
             ("export", lambda: bench_export(tmp, args.quick)),
+            ("ray", lambda: bench_ray(tmp, args.quick)),
             ("open", lambda: bench_open(tmp, args.quick)),
             ("scrub", lambda: bench_scrub(tmp, args.quick)),
             ("serve", lambda: bench_serve(tmp, args.quick)),

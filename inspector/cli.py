@@ -50,7 +50,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
     from .report import build_report, format_report
 
     report = build_report(args.paths, dataset=args.dataset, jobs=args.jobs, use_cache=not args.no_cache,
-                          limit_margin_deg=args.limit_margin)
+                          limit_margin_deg=args.limit_margin, ray=args.ray)
     if args.html:
         from .report_html import write_report_html
 
@@ -81,7 +81,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
     return export_cli(args.path, args.output, rollout=args.rollout, views=args.views,
                       dataset=args.dataset, use_cache=not args.no_cache, limit_margin_deg=args.limit_margin,
-                      episodes=args.episode)
+                      episodes=args.episode, ray=args.ray)
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -132,6 +132,13 @@ def _limit_margin_argument(p: argparse.ArgumentParser) -> None:
                         f"(default {DEFAULT_LIMIT_MARGIN_DEG:g} deg)")
 
 
+def _ray_argument(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
+                   help=f"{what} as Ray tasks: a local Ray instance, or the cluster at ADDRESS (auto, "
+                        "HOST:PORT, ray://HOST:PORT); sessions must be on storage every node reads at "
+                        "the same path (needs pip install 'inspector[ray]')")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="inspector",
@@ -160,11 +167,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
     p.add_argument("--jobs", "-j", type=_positive_int, default=None,
-                   help="worker processes (default: one per core; 1 computes in this process)")
+                   help="worker processes (default: one per core; 1 computes in this process); with "
+                        "--ray, the local Ray instance's CPUs or a cluster's tasks at once")
     p.add_argument("--no-cache", action="store_true",
                    help="neither read nor write the metrics cache ($INSPECTOR_CACHE_DIR, else ~/.cache/inspector)")
     p.add_argument("--html", metavar="OUT.html",
                    help="also write one self-contained page (tables, figures; opens offline)")
+    _ray_argument(p, "compute the rollouts")
     _limit_margin_argument(p)
     p.set_defaults(func=_cmd_report)
 
@@ -202,6 +211,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--views", nargs="*", help="camera views to include (default: all)")
     p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the metrics cache")
+    _ray_argument(p, "write the recordings")
     _limit_margin_argument(p)
     p.set_defaults(func=_cmd_export)
 

@@ -193,7 +193,7 @@ def cached_video_metrics(tl: RolloutTimeline, cache) -> Iterator[None]:
 def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
                views: Sequence[str] | None = None, dataset: str | Path | None = None,
                use_cache: bool = True, limit_margin_deg: float | None = None,
-               episodes: Sequence[int] | None = None) -> int:
+               episodes: Sequence[int] | None = None, ray: str | None = None) -> int:
     """``inspector export``: write one recording per rollout (or dataset episode); returns the exit code.
 
     Args:
@@ -207,6 +207,7 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
         use_cache: take video metrics from the metrics cache (and keep new ones there).
         limit_margin_deg: joint-limit margin [deg] (default: the usual 2 deg).
         episodes: the dataset episodes to export (``path`` a dataset).
+        ray: write the recordings as Ray tasks at this address (see :mod:`inspector.ray_jobs`).
 
     Bad input prints ``error: <file>: <what>`` to stderr and returns 2; the other rollouts of a
     session are still exported when one of them is broken.
@@ -214,20 +215,23 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
     from .cache import MetricsCache
     from .progress import FractionBar
     from .sources import open_sources
-    from .timeline import build_timeline
     from .units import DEFAULT_LIMIT_MARGIN_DEG
 
     margin = DEFAULT_LIMIT_MARGIN_DEG if limit_margin_deg is None else limit_margin_deg
     cache = MetricsCache(enabled=use_cache)
     errors = 0
     try:
-        sources = open_sources([path], dataset=dataset, datasets=True)
+        sources = open_sources([path], dataset=dataset, datasets=True, lazy=ray is not None)  # Ray: workers read arrays
         try:
             if sources.datasets:
                 return _export_episodes(sources.datasets[0], episodes, Path(output), views, margin)
             if episodes:
                 raise InspectorError(path, "--episode applies to a LeRobot dataset; this is a session")
             targets = _plan_outputs(sources, Path(path), Path(output), rollout, views)
+            if ray is not None:
+                from .export_jobs import export_on_ray
+
+                return 2 if export_on_ray(targets, ray, views, margin, use_cache) else 0
             for session, tag, dest in targets:
                 if tag in session.errors:
                     _print_error(session.errors[tag])
@@ -235,11 +239,7 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
                     continue
                 bar = FractionBar(tag)
                 try:
-                    tl = build_timeline(session.rollouts[tag], limit_margin_deg=margin)
-                    rollout_views = None if views is None else [
-                        v for v in views if v in tl.rollout.views or v in tl.gt.views]
-                    with cached_video_metrics(tl, cache):
-                        write_recording(tl, dest, views=rollout_views, progress=bar)
+                    export_rollout(session.rollouts[tag], dest, views, margin, cache, progress=bar)
                 except InspectorError as exc:
                     bar.close()
                     _print_error(exc)
@@ -289,6 +289,18 @@ def _export_episodes(ds, episodes: Sequence[int] | None, output: Path, views: Se
             bar.close()
         print(f"wrote {dest} ({format_size(dest.stat().st_size)})")
     return 2 if errors else 0
+
+
+def export_rollout(rollout, dest: Path, views: Sequence[str] | None, limit_margin_deg: float, cache,
+                   progress: Callable[[float, str], None] | None = None) -> Path:
+    """Write one rollout's recording at ``dest``: its timeline, with video metrics through
+    ``cache`` (:class:`inspector.cache.MetricsCache`); of ``views``, those it has (default: all)."""
+    from .timeline import build_timeline
+
+    tl = build_timeline(rollout, limit_margin_deg=limit_margin_deg)
+    rollout_views = None if views is None else [v for v in views if v in tl.rollout.views or v in tl.gt.views]
+    with cached_video_metrics(tl, cache):
+        return write_recording(tl, dest, views=rollout_views, progress=progress)
 
 
 def _plan_outputs(sources, path: Path, output: Path, tag: str | None, views: Sequence[str] | None):

@@ -22,7 +22,8 @@ from .units import DEFAULT_LIMIT_MARGIN_DEG, JOINT_NAMES
 
 def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | None = None,
                  use_cache: bool = True, limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG,
-                 cache_dir: str | None = None, progress: bool | None = None) -> dict[str, Any]:
+                 cache_dir: str | None = None, progress: bool | None = None,
+                 ray: str | None = None) -> dict[str, Any]:
     """Metrics for every rollout under ``paths`` (and every episode of the LeRobot datasets among
     them); what could not be read is listed under ``errors``.
 
@@ -35,16 +36,21 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
         limit_margin_deg: tolerance past a joint limit before it counts as a violation [deg].
         cache_dir: the metrics cache directory (default: the user's cache directory).
         progress: a progress bar on stderr (default: when stderr is a terminal).
+        ray: run the tasks on Ray at this address instead (``local``, ``auto``, ``HOST:PORT``,
+            ``ray://HOST:PORT``; see :mod:`inspector.ray_jobs`); ``jobs`` is then a local
+            instance's CPUs, or a cluster's tasks at once (default: no limit).
 
     Returns:
         ``{"rollouts", "aggregate", "prompt_divergence"?, "episodes"?, "warnings"?, "errors"?}``.
 
     Raises:
         InspectorError: a path is unusable, or nothing under ``paths`` could be reported (none
-            at all, or every one broken: the first one's error, counting the others).
+            at all, or every one broken: the first one's error, counting the others), or
+            ``ray`` cannot be used.
     """
     from .episodes import dataset_name, episode_tag
 
+    ray_jobs = jobs
     jobs = default_jobs() if jobs is None else max(1, jobs)
     # arrays are read by the workers; datasets are reported episode by episode
     sources = open_sources(paths, dataset=dataset, lazy=True, datasets=True)
@@ -62,7 +68,7 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
         rows: dict[tuple[str, str], dict[str, Any]] = {}
         bar = _progress_bar(len(order), progress)
         n_cached = 0
-        for outcomes in run_tasks(tasks, jobs):
+        for outcomes in run_tasks(tasks, jobs) if ray is None else _on_ray(tasks, ray, ray_jobs):
             for o in outcomes:
                 if o.row is not None:
                     rows[(o.session_root, o.tag)] = o.row
@@ -103,6 +109,13 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
         return report
     finally:
         sources.close()
+
+
+def _on_ray(tasks, address: str, jobs: int | None):
+    from .ray_jobs import ray_workers
+
+    with ray_workers(address, jobs) as workers:
+        yield from workers.run_tasks(tasks)
 
 
 def _prompt_divergences(sources, keys: list[tuple[str, str]], rows: dict) -> list[dict[str, Any]]:

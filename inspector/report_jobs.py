@@ -98,9 +98,7 @@ def plan_tasks(sessions: Sequence[Any], jobs: int, limit_margin_deg: float, cach
                              r.steps_per_chunk) if dataset is not None and r.episode_index is not None
                             and not r.has_gt_joints and not r.gt_views else tag)
             groups[(str(session.root), same_gt)].append(tag)
-    n_rollouts = sum(len(tags) for tags in groups.values())
-    # two tasks per worker: larger tasks share more GT decoding, and the last ones still balance
-    per_task = max(1, min(MAX_TASK_ROLLOUTS, math.ceil(n_rollouts / (2 * max(1, jobs)))))
+    per_task = rollouts_per_task(sum(len(tags) for tags in groups.values()), jobs)
     tasks: list[Task | EpisodeTask] = []
     by_root = {str(s.root): s for s in sessions}
     for (root, _), tags in groups.items():
@@ -119,6 +117,17 @@ def plan_episode_tasks(datasets: Sequence[Any], jobs: int, limit_margin_deg: flo
         for i in range(0, len(indexes), per_task):
             tasks.append(EpisodeTask(str(ds.root), tuple(indexes[i:i + per_task]), limit_margin_deg))
     return tasks
+
+
+def rollouts_per_task(n_rollouts: int, jobs: int) -> int:
+    """Two tasks per worker: larger tasks share more GT decoding, and the last ones still balance."""
+    return max(1, min(MAX_TASK_ROLLOUTS, math.ceil(n_rollouts / (2 * max(1, jobs)))))
+
+
+def worker_died(task: Task | EpisodeTask, why: str) -> list[Outcome]:
+    """The outcomes of a task whose worker died before it returned: each rollout, with ``why``."""
+    return [Outcome(task.session_root, tag, error_file=str(Path(task.session_root) / "rollouts" / tag),
+                    error=f"the worker process computing it died ({why})") for tag in task.tags]
 
 
 def run_tasks(tasks: Sequence[Task | EpisodeTask], jobs: int) -> Iterator[list[Outcome]]:
@@ -140,8 +149,7 @@ def run_tasks(tasks: Sequence[Task | EpisodeTask], jobs: int) -> Iterator[list[O
             try:
                 yield future.result()
             except BrokenProcessPool as exc:  # a worker died (killed, out of memory, a crash)
-                yield [Outcome(task.session_root, tag, error_file=str(Path(task.session_root) / "rollouts" / tag),
-                               error=f"the worker process computing it died ({exc})") for tag in task.tags]
+                yield worker_died(task, str(exc))
 
 
 def _init_worker() -> None:
@@ -171,22 +179,17 @@ def run_task(task: Task | EpisodeTask) -> list[Outcome]:
         return _run_episode_task(task)
     from .cache import MetricsCache, rollout_key
     from .ground_truth import resolve_ground_truth
-    from .session import ROLLOUTS_DIR, load_rollout, read_session
 
-    root = Path(task.session_root)
     try:
-        session = read_session(root)
+        session = read_task_session(task.session_root, task.dataset)
     except InspectorError as exc:
         return [Outcome(task.session_root, tag, error_file=exc.file, error=exc.what) for tag in task.tags]
-    if task.dataset is not None:
-        session.gt_source["dataset"] = task.dataset
     cache = MetricsCache(task.cache_dir, enabled=task.use_cache)
     outcomes: list[Outcome] = []
     todo: list[_Pending] = []
     for tag in task.tags:
         try:
-            rollout = load_rollout(root / ROLLOUTS_DIR / tag, session.units)
-            rollout.session = session
+            rollout = load_task_rollout(session, tag)
             gt = resolve_ground_truth(rollout)
             key = rollout_key(rollout, gt, task.limit_margin_deg)
             record = cache.get(key) or {}
@@ -220,6 +223,25 @@ def _run_episode_task(task: EpisodeTask) -> list[Outcome]:
         except InspectorError as exc:
             outcomes.append(Outcome(task.dataset_root, episode_tag(index), error_file=exc.file, error=exc.what))
     return outcomes
+
+
+def read_task_session(session_root: str, dataset: str | None) -> Any:
+    """A worker's :class:`inspector.session.Session` (``session.json`` alone), GT ``dataset`` applied."""
+    from .session import read_session
+
+    session = read_session(Path(session_root))
+    if dataset is not None:
+        session.gt_source["dataset"] = dataset
+    return session
+
+
+def load_task_rollout(session: Any, tag: str) -> Any:
+    """The rollout ``tag`` of a worker's session, read and validated."""
+    from .session import ROLLOUTS_DIR, load_rollout
+
+    rollout = load_rollout(session.root / ROLLOUTS_DIR / tag, session.units)
+    rollout.session = session
+    return rollout
 
 
 @dataclass

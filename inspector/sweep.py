@@ -128,7 +128,10 @@ def sweep_metrics(chunks: npt.ArrayLike, gt: npt.ArrayLike | None, units: Units 
     out.rmse, out.per_step_mse, out.per_joint_rmse = np.full(B, np.nan), np.full((B, H), np.nan), np.full((B, J), np.nan)
     if inside.any():
         gt_chunks = gt[starts[inside, None] + np.arange(H)[None]]  # (n_inside, H, 6)
-        sq = (c[:, inside] - gt_chunks[None]) ** 2  # (B, n_inside, H, 6)
+        # (B, n_inside, H, 6), contiguous: the boolean index lays the batch axis innermost, and
+        # numpy then sums each rollout in another order than alone (a last-bit difference that
+        # would make a row depend on which rollouts shared its batch, i.e. on --jobs or --ray)
+        sq = np.ascontiguousarray((c[:, inside] - gt_chunks[None]) ** 2)
         out.chunk_rmse[:, inside] = np.sqrt(sq.mean(axis=(2, 3)))
         out.rmse = np.sqrt(sq.mean(axis=(1, 2, 3)))
         out.per_step_mse = sq.mean(axis=(1, 3))

@@ -230,6 +230,24 @@ def test_report_is_the_same_with_one_or_two_workers_and_from_the_cache(tmp_path)
     assert one == two == cached
 
 
+def test_a_rollouts_numbers_do_not_depend_on_its_batch():
+    """Bit for bit: how rollouts are cut into tasks (``--jobs``, ``--ray``) never shows in a row."""
+    from inspector.ground_truth import resolve_ground_truth
+    from inspector.session import open_session
+    from inspector.timeline import build_timelines
+
+    session = open_session(DEMO)
+    rollouts = [session.rollouts[t] for t in ("bias_elbow", "limits_wrist", "prompt_novel", "prompt_train")]
+    gt = resolve_ground_truth(rollouts[0])
+    together = build_timelines(rollouts, gt)
+    for i, rollout in enumerate(rollouts):
+        alone = build_timelines([rollout], gt)[0]
+        for name in ("time_aligned_drift", "best_match_drift", "dtw_drift", "ee_error_mm", "chunk_rmse"):
+            assert np.array_equal(getattr(alone, name), getattr(together[i], name), equal_nan=True), name
+        for name in ("rmse", "per_step_mse", "per_joint_rmse"):
+            assert np.array_equal(getattr(alone.chunk_errors, name), getattr(together[i].chunk_errors, name)), name
+
+
 def test_metrics_cache_hits_and_invalidates(tmp_path):
     import shutil
 

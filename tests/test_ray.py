@@ -1,0 +1,181 @@
+"""``--ray``: report and export jobs as Ray tasks, on a real local Ray instance of 2 CPUs.
+
+Ray starts slowly (seconds), so the tests are few: the command line's report is compared with the
+local run's JSON (its own Ray, in the command's process); the rest share one local instance that
+this module starts in the test process and stops at its end, checking that Ray's processes went
+with it. Addresses that lead nowhere are refused in seconds without Ray.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from inspector.errors import InspectorError
+from inspector.report import build_report
+from inspector.report_jobs import Task, rollouts_per_task, run_task
+
+ray = pytest.importorskip("ray", reason="Ray is an optional extra: pip install -e '.[ray]'")
+
+from inspector.export import export_cli  # noqa: E402
+from inspector.ray_jobs import bundle_tasks, check_address, import_ray, ray_workers  # noqa: E402
+from test_export import rrd_verify  # noqa: E402
+
+pytestmark = pytest.mark.slow
+
+REPO = Path(__file__).resolve().parents[1]
+DEMO = REPO / "sessions" / "demo"
+RAY_PROCESSES = ("raylet", "gcs_server")
+
+
+def ray_processes() -> set[int]:
+    import psutil
+
+    pids = set()
+    for p in psutil.process_iter(["name"]):
+        if p.info["name"] in RAY_PROCESSES:
+            pids.add(p.pid)
+    return pids
+
+
+def wait_gone(pids: set[int], deadline_s: float = 60) -> set[int]:
+    """``pids`` still alive once they are all gone or the deadline has passed."""
+    end = time.monotonic() + deadline_s
+    while (alive := pids & ray_processes()) and time.monotonic() < end:
+        time.sleep(0.2)
+    return alive
+
+
+def inspector(*args: str, cache_dir: Path, timeout: float = 600) -> subprocess.CompletedProcess:
+    env = {**os.environ, "INSPECTOR_CACHE_DIR": str(cache_dir), "RAY_USAGE_STATS_ENABLED": "0"}
+    return subprocess.run([sys.executable, "-m", "inspector", *map(str, args)], capture_output=True, text=True,
+                          env=env, timeout=timeout)
+
+
+@pytest.fixture()
+def broken_demo(tmp_path: Path) -> Path:
+    """A copy of the demo with ``bias_elbow``'s wrist video truncated (undecodable after a few frames)."""
+    session = tmp_path / "demo"
+    shutil.copytree(DEMO, session, ignore=shutil.ignore_patterns("single_f[1-3]*"))
+    video = session / "rollouts" / "bias_elbow" / "video" / "wrist.mp4"
+    video.write_bytes(video.read_bytes()[:5000])
+    return session
+
+
+# ----------------------------------------------------------------------------------------------
+# The command line, each run with its own Ray (before this module's shared instance starts)
+
+
+def test_report_json_on_ray_is_the_local_report(imported_session, tmp_path):
+    before = ray_processes()
+    paths = [imported_session]
+    local = inspector("report", *paths, "--json", "--jobs", "2", cache_dir=tmp_path / "cache-local")
+    assert local.returncode == 0, local.stderr
+    on_ray = inspector("report", *paths, "--json", "--ray", "--jobs", "2", cache_dir=tmp_path / "cache-ray")
+    assert on_ray.returncode == 0, on_ray.stderr
+    assert "inspector: Ray at local, 2 CPU(s)" in on_ray.stderr
+    assert json.loads(on_ray.stdout) == json.loads(local.stdout)
+    report = json.loads(on_ray.stdout)
+    assert len(report["rollouts"]) == 6 and report["prompt_divergence"]  # every fixture, the prompt pair
+    assert not wait_gone(ray_processes() - before), "Ray processes outlived the command"
+
+
+def test_unreachable_cluster_is_one_line(tmp_path):
+    start = time.monotonic()
+    out = inspector("report", DEMO, "--ray", "ray://127.0.0.1:1", cache_dir=tmp_path / "cache")
+    assert time.monotonic() - start < 60
+    assert out.returncode == 2
+    assert out.stderr.startswith("error: ray://127.0.0.1:1: cannot reach a Ray cluster there (")
+    assert out.stderr.count("\n") == 1 and out.stdout == ""
+
+
+def test_addresses_that_are_not_ray_are_refused_in_seconds():
+    with socket.socket() as server:  # listens, never answers: not a gRPC server
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        address = f"127.0.0.1:{server.getsockname()[1]}"
+        start = time.monotonic()
+        with pytest.raises(InspectorError, match="answers, but not as Ray's GCS or Ray Client"):
+            check_address(address)
+        assert time.monotonic() - start < 30
+    with pytest.raises(InspectorError, match="not a Ray address"):
+        check_address("sessions/demo")  # --ray ADDRESS swallowed a path
+
+
+def test_missing_ray_says_how_to_install(monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)
+    with pytest.raises(InspectorError, match=r"pip install 'inspector\[ray\]'"):
+        import_ray()
+
+
+def test_bundles_cover_every_rollout_once_and_are_not_tiny():
+    small = [Task("s", (f"t{i}",), None, 2.0) for i in range(40)]  # 40 GT groups of one rollout
+    big = [Task("s", tuple(f"b{i}" for i in range(100)), None, 2.0)]
+    for tasks, cpus in ((small, 2), (small + big, 4), (small, 64)):
+        bundles = bundle_tasks(tasks, cpus)
+        tags = [tag for bundle in bundles for task in bundle for tag in task.tags]
+        assert tags == [tag for task in tasks for tag in task.tags]
+        sizes = [sum(len(t.tags) for t in b) for b in bundles]
+        per_task = rollouts_per_task(len(tags), cpus)
+        assert all(per_task <= size < 2 * per_task for size in sizes[:-1]), sizes
+    assert [len(b) for b in bundle_tasks(small, 2)] == [10] * 4  # 40 rollouts, 2 CPUs: 4 bundles of 10
+    assert len(bundle_tasks(big, 2)) == 4  # 100 rollouts of one group, cut in 4
+
+
+# ----------------------------------------------------------------------------------------------
+# One local Ray instance (2 CPUs) shared by the tests below
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    before = ray_processes()
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    with ray_workers("local", 2) as workers:
+        assert workers.cpus == 2
+        started = ray_processes() - before
+        assert started, "no raylet or gcs_server started"
+        yield workers
+    assert not ray.is_initialized()
+    assert not wait_gone(started), "Ray processes outlived the module"
+
+
+def test_a_broken_rollout_is_listed_as_locally(local_ray, broken_demo):
+    local = build_report([str(broken_demo)], jobs=1, use_cache=False)
+    on_ray = build_report([str(broken_demo)], ray="local", use_cache=False)  # joins the shared instance
+    assert "wrist.mp4" in on_ray["errors"]["demo/bias_elbow"]
+    assert on_ray == local
+
+
+def test_ray_workers_honour_the_metrics_cache(local_ray, tmp_path):
+    cache = tmp_path / "cache"
+    first = build_report([str(DEMO)], ray="local", cache_dir=str(cache))
+    assert list(cache.rglob("*.json")), "the Ray workers wrote no cache entries"
+    tags = tuple(r["tag"] for r in first["rollouts"])
+    again = run_task(Task(str(DEMO), tags, None, 2.0, str(cache)))  # here, from what Ray's workers wrote
+    assert [o.cached for o in again] == [True] * len(tags)
+    assert [o.row for o in again] == first["rollouts"]
+    outcomes = [o for batch in local_ray.run_tasks([Task(str(DEMO), tags, None, 2.0, str(cache))]) for o in batch]
+    assert all(o.cached for o in outcomes) and len(outcomes) == len(tags)
+
+
+def test_export_on_ray_writes_what_the_local_export_writes(local_ray, broken_demo, tmp_path, capsys):
+    for tag in ("tempo_0.8x", "limits_wrist", "overrun_60chunks", "prompt_train", "prompt_novel"):
+        shutil.rmtree(broken_demo / "rollouts" / tag)  # keep it short: bias_elbow (broken), single_f0*
+    local_out, ray_out = tmp_path / "local", tmp_path / "ray"
+    assert export_cli(broken_demo, local_out, use_cache=False) == 2
+    local = capsys.readouterr()
+    assert export_cli(broken_demo, ray_out, use_cache=False, ray="local") == 2
+    on_ray = capsys.readouterr()
+    assert sorted(p.name for p in ray_out.iterdir()) == sorted(p.name for p in local_out.iterdir()) \
+        == ["single_f000.rrd", "single_f076.rrd"]
+    rrd_verify(ray_out / "single_f000.rrd")
+    assert on_ray.err == local.err and "wrist.mp4" in on_ray.err  # the same one line
+    assert on_ray.out.replace(str(ray_out), "OUT") == local.out.replace(str(local_out), "OUT")
