@@ -344,6 +344,17 @@ def _dest_under_file(ws: Workspace, d: Path) -> list[Any]:
     return ["import", "dreamzero-so101", ws.source(d, SC), "-o", d / "out" / "file" / "session"]
 
 
+# a newline, an escape sequence (a terminal colour) and a Unicode line separator
+CONTROL_NAME = "ep\n000\x1b[31m\u2028"
+CONTROL_NAME_ESCAPED = r"ep\n000\x1b[31m\u2028"  # as the error line writes it
+
+
+def _control_chars_in_path(ws: Workspace, d: Path) -> list[Any]:
+    src = copy_tree(ws.dz / AR, d / "src" / CONTROL_NAME)
+    truncate(src / _AR_TRACE)
+    return ["import", "dreamzero-so101", src, "-o", d / "out" / "session"]
+
+
 def _import_with_dataset(rel: str, mutate_ds: Callable[[Path], Any], *extra: Any):
     def build(ws: Workspace, d: Path) -> list[Any]:
         ds = ws.dataset(d)
@@ -463,6 +474,8 @@ CASES: list[Case] = [
     Case("import-dest-exists", _dest_exists, file="out/session", field="already exists", out=("session",),
          check=_check_dest_untouched),
     Case("import-dest-under-a-file", _dest_under_file, file="out/file", field="File exists", out=("file",)),
+    Case("import-control-characters-in-path", _control_chars_in_path, file=f"src/{CONTROL_NAME_ESCAPED}/action_trace.npy",
+         field="not a readable .npy"),
     Case("import-dataset-episode-beyond", _import_with_dataset(SC, lambda ds: None, "--episode", "9"),
          file="so101_v30", field="episode 9 is out of range"),
     Case("import-dataset-start-frame-beyond", _import_with_dataset("zeroshot_chunk/f169", lambda ds: None, "--episode", "0"),

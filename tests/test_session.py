@@ -173,3 +173,25 @@ def test_every_public_name_resolves():
         assert name == "JOINT_NAMES" or value.__name__ == name
     with pytest.raises(AttributeError):
         inspector.not_a_name  # noqa: B018
+
+
+# ----------------------------------------------------------------------------------------------
+# Error lines
+
+
+@settings(max_examples=200, deadline=None)
+@given(path=st.text(min_size=1), what=st.text())
+def test_error_is_one_printable_line_whatever_the_path(path, what):
+    """A path or message with newlines, escape sequences, bidi overrides or undecodable bytes
+    still makes one line, with those characters written as escapes."""
+    import unicodedata
+
+    message = str(InspectorError(path, what))
+    assert message.splitlines() == [message]
+    assert not [c for c in message if unicodedata.category(c) in ("Cc", "Cf", "Cs", "Zl", "Zp")]
+    assert InspectorError(path, what).file == path  # kept as given for programs
+
+
+def test_error_escapes_control_characters():
+    err = InspectorError("/data/ep\n0\x1b[31m\u2028\udcff/meta.json", "bad\n thing")
+    assert str(err) == "/data/ep\\n0\\x1b[31m\\u2028\\udcff/meta.json: bad thing"

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..errors import InspectorError
+from ..errors import InspectorError, one_line
 from ..timeline import RolloutTimeline
 from ._frames import LOADING, FramePair
 
@@ -121,7 +121,7 @@ def rollout_card(tl: RolloutTimeline, metrics: Sequence[tuple[str, str]], gt_not
 def error_card(title: str, error: BaseException) -> str:
     """A red card naming the file at fault and what is wrong with it."""
     if isinstance(error, InspectorError):
-        file, what = error.file, error.what
+        file, what = one_line(error.file), error.what
     else:
         file, what = "", f"{type(error).__name__}: {error}"
     file_row = f"<div><b>file</b> <code style='word-break:break-all'>{esc(file)}</code></div>" if file else ""
