@@ -26,11 +26,15 @@ directory under ``rollouts/`` and renamed; JSON files are replaced with ``os.rep
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import json
+import math
 import os
 import re
 import shutil
 import tempfile
+import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Literal, Mapping
@@ -178,16 +182,51 @@ def is_rollout(path: str | Path) -> bool:
     return (Path(path) / ROLLOUT_FILE).is_file()
 
 
-def read_json_object(path: Path) -> dict[str, Any]:
-    """Parse a JSON file that must hold an object; errors name the file."""
+def read_json(path: Path) -> Any:
+    """Parse a JSON file as the standard defines JSON; every failure is an :class:`InspectorError`
+    naming the file (and the field, for a NaN or Infinity, which JSON does not have).
+
+    Raises:
+        InspectorError: missing, not a regular file, unreadable, not UTF-8, not JSON, nested past
+            the parser's depth, an integer past Python's digit limit, or a non-finite number.
+    """
     if not path.is_file():
-        raise InspectorError(path, "file not found")
+        raise InspectorError(path, "is a directory, not a file" if path.is_dir() else "file not found")
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(path.read_bytes())
+    except OSError as exc:
+        raise InspectorError(path, f"cannot read ({exc.strerror or exc})") from None
     except (ValueError, RecursionError) as exc:  # bad UTF-8, bad JSON, an int of 5000 digits, [[[[...
         raise InspectorError(path, f"invalid JSON ({type(exc).__name__}: {exc})") from None
+    found = _first_non_finite(data)
+    if found is not None:
+        raise InspectorError(path, f"{found[0]}: non-finite number {found[1]} (JSON has no NaN or Infinity)")
+    return data
+
+
+def read_json_object(path: Path) -> dict[str, Any]:
+    """:func:`read_json` of a file that must hold an object."""
+    data = read_json(path)
     require(isinstance(data, dict), path, f"expected a JSON object, found {type(data).__name__}")
     return data
+
+
+def _first_non_finite(data: Any) -> tuple[str, float] | None:
+    """(field, value) of the first NaN/Infinity in document order, e.g. ``("per_joint_rmse[2]", nan)``.
+
+    Iterative: a document as deep as the parser allows must not exhaust the stack here.
+    """
+    stack: list[tuple[str, Any]] = [("(top level)", data)]
+    while stack:
+        where, value = stack.pop()
+        if isinstance(value, float) and not math.isfinite(value):
+            return where, value
+        top = "" if where == "(top level)" else where
+        if isinstance(value, dict):
+            stack.extend((f"{top}.{k}" if top else str(k), v) for k, v in reversed(list(value.items())))
+        elif isinstance(value, list):
+            stack.extend((f"{top}[{i}]", v) for i, v in reversed(list(enumerate(value))))
+    return None
 
 
 def open_session(root: str | Path, check: Callable[[Path], None] | None = None) -> Session:
