@@ -344,6 +344,31 @@ def _dest_under_file(ws: Workspace, d: Path) -> list[Any]:
     return ["import", "dreamzero-so101", ws.source(d, SC), "-o", d / "out" / "file" / "session"]
 
 
+def _overwrite_onto(kind: str) -> Callable[[Workspace, Path], list[Any]]:
+    """``import --overwrite`` onto what is at ``out/session``: a directory of the user's files,
+    a regular file, or a session (the only thing ``--overwrite`` may replace)."""
+    def build(ws: Workspace, d: Path) -> list[Any]:
+        dest = d / "out" / "session"
+        if kind == "directory":
+            dest.mkdir()
+            (dest / "keep.txt").write_text("mine")
+        elif kind == "file":
+            dest.write_text("mine")
+        else:
+            copy_tree(ws.zs3, dest)
+        return ["import", "dreamzero-so101", ws.source(d, SC), "-o", dest, "--overwrite"]
+    return build
+
+
+def _check_file_untouched(run: Run) -> None:
+    assert (run.dir / "out" / "session").read_text() == "mine"
+
+
+def _check_session_replaced(run: Run) -> None:
+    s = open_session(run.dir / "out" / "session")
+    assert sorted(s.rollouts) == ["f084"] and not s.errors  # the old session's f000, f169 are gone
+
+
 # a newline, an escape sequence (a terminal colour) and a Unicode line separator
 CONTROL_NAME = "ep\n000\x1b[31m\u2028"
 CONTROL_NAME_ESCAPED = r"ep\n000\x1b[31m\u2028"  # as the error line writes it
@@ -481,6 +506,12 @@ CASES: list[Case] = [
     Case("import-dest-exists", _dest_exists, file="out/session", field="already exists", out=("session",),
          check=_check_dest_untouched),
     Case("import-dest-under-a-file", _dest_under_file, file="out/file", field="File exists", out=("file",)),
+    Case("import-overwrite-refuses-a-plain-directory", _overwrite_onto("directory"), file="out/session",
+         field="is not a session (no session.json)", out=("session",), check=_check_dest_untouched),
+    Case("import-overwrite-refuses-a-file", _overwrite_onto("file"), file="out/session",
+         field="exists and is a file, not a session", out=("session",), check=_check_file_untouched),
+    Case("import-overwrite-replaces-a-session", _overwrite_onto("session"), rc=0, out=("session",),
+         check=_check_session_replaced),
     Case("import-control-characters-in-path", _control_chars_in_path, file=f"src/{CONTROL_NAME_ESCAPED}/action_trace.npy",
          field="not a readable .npy"),
     Case("import-dataset-episode-beyond", _import_with_dataset(SC, lambda ds: None, "--episode", "9"),
