@@ -496,7 +496,7 @@ CASES: list[Case] = [
     _imp("import-video-not-a-video", AR, lambda s: (s / "rollout_front.mp4").write_text("not a video"),
          "rollout_front.mp4", "cannot read video"),
     _imp("import-sc-pred-video-truncated", SC, lambda s: truncate(s / "pred_top.mp4", 0.3), "pred_top.mp4", "cannot read video"),
-    _imp("import-mosaic-truncated", MOSAIC, lambda s: truncate(s / "gt_future.mp4"), "gt_future.mp4", "cannot decode video"),
+    _imp("import-mosaic-truncated", MOSAIC, lambda s: truncate(s / "gt_future.mp4"), "gt_future.mp4", "cannot read video"),
     # ---------------------------------------------------------------- import: paths, dataset
     Case("import-empty-source-dir", lambda ws, d: ["import", "dreamzero-so101", (d / "empty").mkdir() or d / "empty",
                                                    "-o", d / "out" / "session"],

@@ -112,9 +112,9 @@ def test_importer_reads_every_fixture_dir(imported_session):
     assert train.gt_episode_length == 328 and train.prompt == "Pick the red cube"
     f084 = s.rollouts["f084"]
     assert f084.kind == "single_chunk" and f084.start_frame == 84 and f084.gt_actions.shape == (24, 6)
-    mosaic = s.rollouts["train_ep0"]  # GT only as a 2x2 mosaic: cut into views
-    assert mosaic.gt_views == ["front", "gripper", "top"]
-    # each mosaic quarter is one view; GT is decoded at the imagined clip's size for comparison
+    mosaic = s.rollouts["train_ep0"]  # gt_future.mp4 beside the mosaic: the front camera alone
+    assert mosaic.views == ["front", "gripper", "top"] and mosaic.gt_views == ["front"]
+    # GT is decoded at the imagined clip's size for comparison
     assert mosaic.video("front", gt=True).frames.shape == mosaic.video("front").frames.shape
 
 
