@@ -380,6 +380,35 @@ def _control_chars_in_path(ws: Workspace, d: Path) -> list[Any]:
     return ["import", "dreamzero-so101", src, "-o", d / "out" / "session"]
 
 
+NON_ASCII_NAME, LONG_NAME = "épisode_日本", "a" * 250
+
+
+def _odd_source_names(ws: Workspace, d: Path) -> list[Any]:
+    copy_tree(ws.dz / SC, d / "src" / NON_ASCII_NAME)
+    copy_tree(ws.dz / "zeroshot_chunk" / "f169", d / "src" / LONG_NAME)
+    return ["import", "dreamzero-so101", d / "src", "-o", d / "out" / "session"]
+
+
+def _check_odd_source_names(run: Run) -> None:
+    from inspector.session import _TAG
+
+    s = open_session(run.dir / "out" / "session")
+    assert not s.errors and len(s.rollouts) == 2
+    names = {tag: r.extra["source"]["name"] for tag, r in s.rollouts.items()}
+    assert all(_TAG.match(tag) and len(tag) <= 128 for tag in names), names
+    assert sorted(names.values()) == sorted([NON_ASCII_NAME, LONG_NAME])  # the original names are kept
+    assert names.get("episode") == NON_ASCII_NAME, names
+
+
+def _report_long_named_source(ws: Workspace, d: Path) -> list[Any]:
+    return ["report", copy_tree(ws.dz / SC, d / "src" / LONG_NAME), "--json"]
+
+
+def _check_long_named_report(run: Run) -> None:
+    (row,) = run.json()["rollouts"]
+    assert row["tag"] == "a" * 119 + "_" + row["tag"][-8:]
+
+
 def _import_with_dataset(rel: str, mutate_ds: Callable[[Path], Any], *extra: Any):
     def build(ws: Workspace, d: Path) -> list[Any]:
         ds = ws.dataset(d)
@@ -514,6 +543,9 @@ CASES: list[Case] = [
          check=_check_session_replaced),
     Case("import-control-characters-in-path", _control_chars_in_path, file=f"src/{CONTROL_NAME_ESCAPED}/action_trace.npy",
          field="not a readable .npy"),
+    Case("import-non-ascii-and-long-source-names", _odd_source_names, rc=0, out=("session",),
+         check=_check_odd_source_names),
+    Case("report-raw-source-with-a-long-name", _report_long_named_source, rc=0, check=_check_long_named_report),
     Case("import-dataset-episode-beyond", _import_with_dataset(SC, lambda ds: None, "--episode", "9"),
          file="so101_v30", field="episode 9 is out of range"),
     Case("import-dataset-start-frame-beyond", _import_with_dataset("zeroshot_chunk/f169", lambda ds: None, "--episode", "0"),

@@ -116,6 +116,7 @@ def test_importer_reads_every_fixture_dir(imported_session):
     assert mosaic.views == ["front", "gripper", "top"] and mosaic.gt_views == ["front"]
     # GT is decoded at the imagined clip's size for comparison
     assert mosaic.video("front", gt=True).frames.shape == mosaic.video("front").frames.shape
+    assert mosaic.extra["source"]["name"] == "train_ep0"
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:

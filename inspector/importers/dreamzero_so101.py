@@ -19,12 +19,18 @@ joint-limit violations are findings, not something to clamp away. The metas' own
 kept as the source's figures (``extra.reference_metrics``), with a note where one is not what its
 name suggests (``extra.reference_notes``): a mosaic sample's ``video_psnr_db`` compared the whole
 mosaic with the single front view.
+
+A rollout's tag is its directory name made into a valid tag (ASCII letters, digits, ``_.-``, at
+most 128 characters); the directory's own name is kept in ``extra.source.name``.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
+import re
 import tempfile
+import unicodedata
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -41,6 +47,7 @@ PRED_MOSAIC = "predicted_video.mp4"
 GT_FRONT_ONLY = "gt_future.mp4"  # beside a mosaic: the front camera alone, not a mosaic
 MOSAIC_PSNR_NOTE = ("compared the whole 2x2 mosaic (front, top, gripper, black) with the front camera "
                     "alone; not a per-view PSNR")
+MAX_TAG_CHARS = 128
 ROLLOUT_VIEW_PREFIX = "rollout_"
 REFERENCE_FIELDS = ("action_rmse_deg", "action_mse_deg2", "per_joint_rmse", "per_step_mse",
                     "video_psnr_db", "video_pixel_mse", "mean_drift_deg", "final_drift_deg")
@@ -262,7 +269,8 @@ def _extra(meta: dict[str, Any], path: Path, **more: Any) -> dict[str, Any]:
     reference = {k: meta[k] for k in REFERENCE_FIELDS if k in meta}
     info = {k: meta[k] for k in ("training_task", "prompt_kind", "episode_length", "n_steps",
                                  "total_imagined_frames", "final_imagined_state") if k in meta}
-    return {"source": {"format": "dreamzero_so101", "path": str(path.resolve()), **info},
+    return {"source": {"format": "dreamzero_so101", "path": str(path.resolve()), "name": path.resolve().name,
+                       **info},
             "reference_metrics": reference, **{k: v for k, v in more.items() if v is not None}}
 
 
@@ -300,15 +308,33 @@ def _length_field(meta: dict[str, Any], path: Path) -> int | None:
 
 
 def _unique_tag(path: Path, root: Path, used: set[str]) -> str:
-    tag = path.name if path != root else root.resolve().name
-    tag = "".join(c if c.isalnum() or c in "_.-" else "_" for c in tag).lstrip("._-") or "rollout"
-    base, n = tag, 2
+    """A valid rollout tag for a source directory, unique among ``used`` (which it joins)."""
+    base = tag_from_name(path.name if path != root else root.resolve().name)
+    tag, n = base, 2
     while tag in used:
-        parent = path.parent.name
-        tag = f"{parent}_{base}" if n == 2 and parent else f"{base}_{n}"
+        parent = tag_from_name(path.parent.name) if path.parent.name else ""
+        tag = _join_tag(parent, base) if n == 2 and parent else _join_tag(base, str(n))
         n += 1
     used.add(tag)
     return tag
+
+
+def tag_from_name(name: str) -> str:
+    """A valid tag (ASCII letters, digits, ``_.-``, 1-128 characters) made from a directory name:
+    accents dropped (``épisode`` -> ``episode``), other characters -> ``_``, a name too long cut
+    and ended with a hash of the whole name (so two long names stay apart)."""
+    ascii_name = unicodedata.normalize("NFKD", name).encode("ascii", "ignore").decode("ascii")
+    tag = re.sub(r"[^A-Za-z0-9_.-]+", "_", ascii_name).lstrip("._-").rstrip("_")
+    if len(tag) > MAX_TAG_CHARS or not tag:  # too long, or nothing ASCII in it
+        digest = hashlib.sha1(name.encode("utf-8", "surrogateescape")).hexdigest()[:8]
+        tag = _join_tag(tag, digest)
+    return tag
+
+
+def _join_tag(head: str, tail: str) -> str:
+    """``head_tail`` within the tag length, cutting ``head``."""
+    head = head[: MAX_TAG_CHARS - len(tail) - 1].rstrip("._-")
+    return f"{head}_{tail}" if head else tail
 
 
 def _summary(tag: str, args: dict[str, Any]) -> str:
