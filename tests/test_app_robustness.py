@@ -15,6 +15,7 @@ helpers of ``test_app_browser``.
 from __future__ import annotations
 
 import contextlib
+import html
 import ipaddress
 import json
 import logging
@@ -324,6 +325,84 @@ def test_annotations_lock_link_is_not_followed(tmp_path):
     with pytest.raises(InspectorError, match="symbolic link"):
         update_annotation(root, "r", flag=True)
     assert outside.read_text() == "keep" and not (root / "annotations.json").exists()
+
+
+# Hand-edited or hostile annotations.json files, and what the reader says about each.
+HOSTILE_ANNOTATIONS = {
+    "nested-100k-deep": ("[" * 100_000, "invalid JSON (RecursionError"),
+    "5000-digit-integer": ('{"rollouts": {}, "n": 1' + "0" * 5000 + "}", "invalid JSON (ValueError: Exceeds the limit"),
+    "chunks-a-list": ('{"rollouts": {"f084": {"chunks": [1, 2]}}}', "rollouts.f084.chunks: expected an object, found list"),
+    "flag-a-string": ('{"rollouts": {"f084": {"flag": "yes"}}}', "rollouts.f084.flag: expected true or false, found 'yes'"),
+    "chunk-key-not-an-index": ('{"rollouts": {"f169": {"chunks": {"x": {}}}}}', "expected chunk indexes as keys, found 'x'"),
+    "rollouts-a-string": ('{"rollouts": "all"}', "rollouts: expected an object, found 'all'"),
+    "nan": ('{"rollouts": {}, "score": NaN}', "score: non-finite number nan"),
+    "not-utf8": (b"\xff\xfe\x00{", "invalid JSON"),
+    "a-directory": (None, "is a directory, not a file"),
+}
+
+
+def _plant_annotations(root: Path, content: str | bytes | None) -> None:
+    path = root / "annotations.json"
+    if path.is_dir():
+        path.rmdir()
+    elif path.exists():
+        path.unlink()
+    if content is None:
+        path.mkdir()
+    else:
+        path.write_bytes(content.encode() if isinstance(content, str) else content)
+
+
+def _snapshot(path: Path) -> bytes | str:
+    return "<directory>" if path.is_dir() else path.read_bytes()
+
+
+@pytest.mark.parametrize("name", HOSTILE_ANNOTATIONS)
+def test_hostile_annotations_are_reported_and_kept(tmp_path, name):
+    content, message = HOSTILE_ANNOTATIONS[name]
+    _plant_annotations(tmp_path, content)
+    before = _snapshot(tmp_path / "annotations.json")
+    for call in (lambda: read_annotations(tmp_path), lambda: update_annotation(tmp_path, "f084", flag=True)):
+        with pytest.raises(InspectorError) as err:
+            call()
+        assert err.value.file == str(tmp_path / "annotations.json")
+        assert message in err.value.what and err.value.what.endswith("not overwriting it"), err.value.what
+        assert "\n" not in str(err.value)
+    assert _snapshot(tmp_path / "annotations.json") == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".annotations.lock", "annotations.json"]
+
+
+def test_app_shows_hostile_annotations_on_the_notes_panel(sessions, tmp_path, server_errors):  # noqa: F811
+    """Each hostile ``annotations.json`` in a served session: the Notes panel shows the error,
+    saving notes is refused and leaves the file as it was, and the rest of the app works (the
+    rollout opens and scrubs; the server logs no exception)."""
+    served = tmp_path / "sess"
+    shutil.copytree(sessions[0], served)
+    for tag in ("ep000_novel", "ep000_train", "train_ep0", "f000"):
+        shutil.rmtree(served / "rollouts" / tag)
+    served_app = serve([served], port=0, block=False)
+    try:
+        client, tab = connect(served_app)
+        with client:
+            for i, (name, (content, message)) in enumerate(HOSTILE_ANNOTATIONS.items()):
+                _plant_annotations(served, content)
+                before = _snapshot(served / "annotations.json")
+                tag = ("f084", "f169")[i % 2]  # a rollout opened anew reads the notes anew
+                assert tab.open(key(served_app, tag)), (name, tab.error)
+                notes = tab.controls.notes_info.content
+                assert "inspector-error-card" in notes and "annotations.json" in notes, (name, notes)
+                assert html.escape(message, quote=True) in notes, (name, notes)
+                assert not tab.save_notes(rollout_flag=True, rollout_note="mine", chunk_flag=True)
+                assert "notes not saved" in tab.controls.notes_info.content, name
+                assert _snapshot(served / "annotations.json") == before, name
+                assert tab.set_step(5) == 5 and tab.chunk == 0  # the rest keeps working
+            # a sound file again: notes save
+            _plant_annotations(served, '{"rollouts": {}}')
+            assert tab.open(key(served_app, "f084")) and tab.save_notes(rollout_flag=True, rollout_note="ok")
+            assert read_annotations(served)["rollouts"]["f084"]["note"] == "ok"
+    finally:
+        served_app.stop()
+    assert server_errors == []
 
 
 def test_browser_names_sent_over_the_wire_are_not_paths(app, sessions):  # noqa: F811
