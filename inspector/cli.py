@@ -55,7 +55,8 @@ def _cmd_report(args: argparse.Namespace) -> int:
 def _cmd_serve(args: argparse.Namespace) -> int:
     from .app import serve
 
-    serve(args.paths, host=args.host, port=args.port, share=args.share, dataset=args.dataset)
+    serve(args.paths, host=args.host, port=args.port, share=args.share, dataset=args.dataset,
+          exit_when_stopped=True)
     return 0
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 import threading
 import time
 from collections.abc import Sequence
@@ -120,7 +121,8 @@ def _load_robot() -> SharedRobot:
 
 
 def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", port: int = 8080,
-          share: bool = False, dataset: str | Path | None = None, block: bool = True) -> InspectorApp:
+          share: bool = False, dataset: str | Path | None = None, block: bool = True,
+          exit_when_stopped: bool = False) -> InspectorApp:
     """Serve sessions in the browser (the bundled demo when ``paths`` is empty).
 
     Args:
@@ -130,6 +132,10 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
         share: also request a public viser share URL.
         dataset: LeRobot dataset with the GT episodes, for sessions that name none.
         block: serve until Ctrl-C (then stop); False returns the running app at once.
+        exit_when_stopped: with ``block``, end the process as soon as the app has stopped (what
+            the command line wants): the interpreter would otherwise wait for background work
+            that no one needs any more (a rollout's videos still decoding, meshes loading),
+            many seconds on a busy machine.
 
     Returns:
         The :class:`InspectorApp` (``.port``, ``.url``, ``.stop()``, ``.tabs``).
@@ -144,21 +150,40 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
                                  "`inspector demo --rebuild`, or serve a session: `inspector serve PATH`")
         paths = [BUNDLED_DEMO]
     sources = open_sources(paths, dataset=dataset, confine=True)  # no link leads out of a root
-    app = InspectorApp(sources, host=host, port=port)
-    n_ok = sum(len(s.rollouts) for s in sources.sessions)
-    n_bad = sum(len(s.errors) for s in sources.sessions)
-    print(f"inspector: serving {n_ok} rollout(s) from {len(sources.sessions)} session(s)"
-          + (f" ({n_bad} could not be read; see the app)" if n_bad else "") + f" at {app.url}", flush=True)
-    if share:
-        url = app.server.request_share_url(verbose=False)
-        print(f"inspector: share URL {url}" if url else "inspector: no share URL could be obtained", flush=True)
+    try:
+        app = InspectorApp(sources, host=host, port=port)
+    except BaseException:  # Ctrl-C while starting included: drop temporary sessions
+        sources.close()
+        raise
     if not block:
+        try:
+            _announce(app, share)
+        except BaseException:
+            app.stop()
+            raise
         return app
     try:
+        _announce(app, share)
         while True:
             time.sleep(3600)
     except KeyboardInterrupt:
         pass
     finally:
         app.stop()
+    if exit_when_stopped:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(0)  # the app and its temporary sessions are gone: nothing is left to clean up
     return app
+
+
+def _announce(app: InspectorApp, share: bool) -> None:
+    """Say what is served where (and the share URL when asked for)."""
+    sessions = app.sources.sessions
+    n_ok = sum(len(s.rollouts) for s in sessions)
+    n_bad = sum(len(s.errors) for s in sessions)
+    print(f"inspector: serving {n_ok} rollout(s) from {len(sessions)} session(s)"
+          + (f" ({n_bad} could not be read; see the app)" if n_bad else "") + f" at {app.url}", flush=True)
+    if share:
+        url = app.server.request_share_url(verbose=False)
+        print(f"inspector: share URL {url}" if url else "inspector: no share URL could be obtained", flush=True)
