@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import shutil
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 CHROMIUM = Path("/usr/bin/chromium")
@@ -12,6 +12,8 @@ CHROMIUM_ARGS = [
     "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
     "--disable-background-networking", "--disable-component-update", "--disable-sync",
 ]
+# Rerun's web viewer needs WebGL2: SwiftShader renders it on the CPU when there is no GPU.
+SWIFTSHADER_ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
 SCENE_TIMEOUT_S = 20.0
 # The first page of a browser compiles its WebGL shaders in software: allow for it.
 PAGE_TIMEOUT_S = 60.0
@@ -28,10 +30,10 @@ def skip_reason() -> str | None:
     return None
 
 
-def launch(playwright):
-    """Launch the system Chromium headless."""
+def launch(playwright, extra_args: Sequence[str] = ()):
+    """Launch the system Chromium headless (``extra_args``, e.g. :data:`SWIFTSHADER_ARGS`)."""
     exe = str(CHROMIUM) if CHROMIUM.is_file() else shutil.which("chromium")
-    return playwright.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS, headless=True)
+    return playwright.chromium.launch(executable_path=exe, args=[*CHROMIUM_ARGS, *extra_args], headless=True)
 
 
 def wait_until(condition: Callable[[], object], timeout: float = SCENE_TIMEOUT_S, interval: float = 0.1,
