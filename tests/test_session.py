@@ -82,7 +82,7 @@ def _edit(rollout_dir: Path, **fields) -> None:
     (rollout_dir / "rollout.json").write_text(json.dumps(meta))
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(st.dictionaries(st.sampled_from(["kind", "horizon", "executed_per_chunk", "frames_per_chunk", "fps",
                                         "start_frame", "episode_index", "views", "gt", "prompt", "extra"]),
                        st.one_of(st.none(), st.booleans(), st.integers(-5, 50), st.floats(allow_nan=True),
