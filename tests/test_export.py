@@ -583,6 +583,14 @@ def test_cli_entry_point(synthetic_session, tmp_path):
 # What a viewer shows
 
 
+def _listening_on(port: int) -> bool:
+    import socket
+
+    with socket.socket() as s:
+        s.settimeout(2)
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
 def _free_port() -> int:
     import socket
 
@@ -604,12 +612,37 @@ def viewer_recording(tmp_path_factory) -> Path:
     return write_recording(tl, tmp_path_factory.mktemp("rrd") / "reach.rrd")
 
 
+def _rerun_binary() -> Path:
+    """The viewer binary itself: the ``rerun`` script only starts it as a child of its own, and
+    stopping the script would leave the viewer running."""
+    import rerun_cli
+
+    binary = Path(rerun_cli.__file__).parent / "rerun"
+    return binary if binary.is_file() else RERUN
+
+
 def _die_with_parent() -> None:
     """In the child before exec: SIGTERM when the test process dies, so no viewer outlives it."""
     import ctypes
     import signal
 
     ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+
+
+def _stop_group(proc: subprocess.Popen) -> None:
+    """Stop ``proc`` and whatever it started (it leads its own process group)."""
+    import signal
+
+    for sig, wait_s in ((signal.SIGTERM, 10), (signal.SIGKILL, 10)):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            break
+        try:
+            proc.wait(wait_s)
+            break
+        except subprocess.TimeoutExpired:
+            continue
 
 
 def _first_error_line(log: Path) -> str:
@@ -670,9 +703,9 @@ def test_web_viewer_draws_both_arms(viewer_recording, tmp_path):
     log = tmp_path / "rerun.log"
     with open(log, "wb") as out:
         viewer = subprocess.Popen(
-            [str(RERUN), str(viewer_recording), "--serve-web", "--bind", "127.0.0.1",
+            [str(_rerun_binary()), str(viewer_recording), "--serve-web", "--bind", "127.0.0.1",
              "--web-viewer-port", str(web_port), "--port", str(grpc_port)],
-            stdout=out, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent)
+            stdout=out, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent, start_new_session=True)
     try:
         def web_viewer_answers() -> bool:
             if viewer.poll() is not None:
@@ -713,9 +746,5 @@ def test_web_viewer_draws_both_arms(viewer_recording, tmp_path):
             finally:
                 browser.close()
     finally:
-        viewer.terminate()
-        try:
-            viewer.wait(10)
-        except subprocess.TimeoutExpired:
-            viewer.kill()
-            viewer.wait(10)
+        _stop_group(viewer)
+    assert not _listening_on(web_port) and not _listening_on(grpc_port), "the viewer outlived the test"
