@@ -15,8 +15,9 @@ CHROMIUM_ARGS = [
 # Rerun's web viewer needs WebGL2: SwiftShader renders it on the CPU when there is no GPU.
 SWIFTSHADER_ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
 SCENE_TIMEOUT_S = 20.0
-# The first page of a browser compiles its WebGL shaders in software: allow for it.
-PAGE_TIMEOUT_S = 60.0
+# The first page of a browser compiles its WebGL shaders in software, on a machine that may be
+# busy with other work: allow for it (a deadline, not a wait).
+PAGE_TIMEOUT_S = 120.0
 
 
 def skip_reason() -> str | None:
