@@ -14,7 +14,7 @@ CHROMIUM_ARGS = [
 ]
 # Rerun's web viewer needs WebGL2: SwiftShader renders it on the CPU when there is no GPU.
 SWIFTSHADER_ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
-SCENE_TIMEOUT_S = 20.0
+SCENE_TIMEOUT_S = 60.0
 # The first page of a browser compiles its WebGL shaders in software, on a machine that may be
 # busy with other work: allow for it (a deadline, not a wait).
 PAGE_TIMEOUT_S = 120.0
@@ -35,6 +35,15 @@ def launch(playwright, extra_args: Sequence[str] = ()):
     """Launch the system Chromium headless (``extra_args``, e.g. :data:`SWIFTSHADER_ARGS`)."""
     exe = str(CHROMIUM) if CHROMIUM.is_file() else shutil.which("chromium")
     return playwright.chromium.launch(executable_path=exe, args=[*CHROMIUM_ARGS, *extra_args], headless=True)
+
+
+def open_page(browser, width: int, height: int):
+    """A new page whose actions (click, fill, wait_for_selector) may take up to
+    :data:`PAGE_TIMEOUT_S`: Playwright's default 30 s is too short when several software-rendered
+    pages share a busy 2-core machine."""
+    page = browser.new_page(viewport={"width": width, "height": height})
+    page.set_default_timeout(PAGE_TIMEOUT_S * 1000)
+    return page
 
 
 def wait_until(condition: Callable[[], object], timeout: float = SCENE_TIMEOUT_S, interval: float = 0.1,

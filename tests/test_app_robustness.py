@@ -33,7 +33,7 @@ import traceback
 from pathlib import Path
 
 import pytest
-from browser import PAGE_TIMEOUT_S, frame_sources, skip_reason, slider_thumb, wait_until
+from browser import PAGE_TIMEOUT_S, frame_sources, open_page, skip_reason, slider_thumb, wait_until
 from test_app import app, connect, key, sessions  # noqa: F401  (app and sessions are fixtures)
 from test_app_browser import browser, open_in_page, page_tab  # noqa: F401  (browser is a fixture)
 
@@ -113,7 +113,7 @@ def test_four_browser_pages_hold_their_own_timelines(browser, app, server_errors
     # Four pages (one context each) load at once.
     pages, page_errors = [], []
     for n in range(len(plan)):
-        page = browser.new_page(viewport={"width": WIDTH, "height": HEIGHT})
+        page = open_page(browser, WIDTH, HEIGHT)
         page.on("pageerror", lambda exc, n=n: page_errors.append(f"page {n}: {exc}"))
         page.goto(app.url)
         pages.append(page)
