@@ -72,7 +72,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     from .app import serve
 
     serve(args.paths, host=args.host, port=args.port, share=args.share, dataset=args.dataset,
-          cache_mb=args.cache_mb, use_cache=not args.no_cache)
+          cache_mb=args.cache_mb, use_cache=not args.no_cache, exit_when_stopped=True)
     return 0
 
 

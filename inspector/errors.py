@@ -1,25 +1,52 @@
 """One error type for bad input: it names the file and says what is wrong with it.
 
 The CLI prints it as ``error: <file>: <what>`` and exits 2; the app shows it on an error card.
+The message is always one line: control characters in a path (a newline, an escape sequence)
+are written as escapes, never as themselves.
 """
 
 from __future__ import annotations
 
+import unicodedata
 from pathlib import Path
+
+# Characters shown as escapes: controls (Cc), format characters such as bidi overrides (Cf),
+# undecodable bytes of a file name (Cs, surrogate escapes) and the Unicode line/paragraph breaks.
+_ESCAPED_CATEGORIES = frozenset({"Cc", "Cf", "Cs", "Zl", "Zp"})
+_SHORT_ESCAPES = {"\n": "\\n", "\r": "\\r", "\t": "\\t"}
+
+
+def one_line(text: object) -> str:
+    """``text`` with every control character escaped (``\\n``, ``\\x1b``, ``\\u2028``), so it
+    prints as one line and cannot drive a terminal."""
+    s = str(text)
+    if s.isprintable():  # the usual case, fast
+        return s
+    out = []
+    for c in s:
+        if c in _SHORT_ESCAPES:
+            out.append(_SHORT_ESCAPES[c])
+        elif unicodedata.category(c) in _ESCAPED_CATEGORIES:
+            code = ord(c)
+            out.append(f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}" if code < 0x10000
+                       else f"\\U{code:08x}")
+        else:
+            out.append(c)
+    return "".join(out)
 
 
 class InspectorError(Exception):
     """Bad input that a user can fix: a missing file, a wrong shape, a value out of place.
 
     Args:
-        file: the file (or directory) at fault.
+        file: the file (or directory) at fault; kept as given in ``file``, escaped in the message.
         what: one line saying what is wrong, naming the field where there is one.
     """
 
     def __init__(self, file: str | Path, what: str) -> None:
         self.file = str(file)
-        self.what = " ".join(str(what).split())  # always one line
-        super().__init__(f"{self.file}: {self.what}")
+        self.what = one_line(" ".join(str(what).split()))  # line breaks in a message become spaces
+        super().__init__(f"{one_line(self.file)}: {self.what}")
 
 
 def require(condition: bool, file: str | Path, what: str) -> None:

@@ -75,22 +75,22 @@ def write_recording(timeline: RolloutTimeline, path: str | Path, views: Sequence
         pred_name=timeline.labels.pred, gt_name=timeline.labels.gt, chunks=timeline.n_chunks > 1,
         eye=eye_fitting(timeline),
     )
-    path.parent.mkdir(parents=True, exist_ok=True)
-    # a fresh name the stream creates itself (mkstemp's 0600 would stick to the final file)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
+    # Encoded in memory (a few MB) and written by us: a write error (disk full, permission) is
+    # then an ordinary OSError naming the file, not a log line from rerun's writer thread.
     rec = rr.RecordingStream(application_id=application_id(timeline.tag))
     try:
-        rec.save(tmp, default_blueprint=L.build_blueprint(contents))
+        stream = rec.binary_stream()
+        # Active, not only default: in this stream the layout follows the recording's first
+        # message, and a viewer that has already laid the recording out by heuristics keeps that
+        # layout over a mere default (Rerun's web viewer does).
+        rec.send_blueprint(L.build_blueprint(contents), make_active=True, make_default=True)
         session = timeline.rollout.session
         rec.send_recording_name(f"{session.name}/{timeline.tag}" if session is not None else timeline.tag)
         _log_recording(rec, timeline, views, psnr, report)
-        rec.flush()
+        data = stream.read() or b""
+    finally:
         rec.disconnect()
-        os.replace(tmp, path)
-    except BaseException:
-        rec.disconnect()
-        tmp.unlink(missing_ok=True)
-        raise
+    write_file_atomic(path, data)
     report(1.0, "done")
     return path
 
@@ -109,6 +109,30 @@ def eye_fitting(tl: RolloutTimeline) -> tuple[tuple[float, float, float], tuple[
     distance = radius / np.tan(np.radians(55) / 2) * 1.1  # within the viewer's default field of view
     eye = centre + np.asarray(VIEW_DIRECTION) * distance
     return (tuple(float(v) for v in eye), tuple(float(v) for v in centre))  # type: ignore[return-value]
+
+
+def write_file_atomic(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary sibling, so that ``path`` is either the old
+    file or the complete new one; a write error leaves no temporary file.
+
+    Raises:
+        InspectorError: the file cannot be written (no space left, permission denied, ...).
+    """
+    tmp = path.with_name(f".{path.name[:64]}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(tmp, "xb") as fh:  # the usual umask-derived mode, unlike mkstemp's 0600
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise InspectorError(exc.filename if exc.filename and exc.filename != str(tmp) else path,
+                             f"cannot write the recording ({exc.strerror or exc})") from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def _log_recording(rec: rr.RecordingStream, tl: RolloutTimeline, views: list[str],

@@ -146,11 +146,21 @@ def _limit_rows(tl: RolloutTimeline) -> list[str]:
 
 
 def _reference_rows(extra: Mapping[str, object]) -> list[str]:
+    """The source's own figures, each marked as such; a figure with a note (e.g. a mosaic
+    sample's ``video_psnr_db``) carries it on its row."""
     ref = extra.get("reference_metrics") if isinstance(extra, Mapping) else None
     if not isinstance(ref, Mapping):
         return []
-    return [f"| {k} (as reported by the source) | {_fmt(v) if isinstance(v, (int, float)) else v} |"
-            for k, v in ref.items() if isinstance(v, (int, float, str))]
+    notes = extra.get("reference_notes")
+    notes = notes if isinstance(notes, Mapping) else {}
+    rows = []
+    for k, v in ref.items():
+        if isinstance(v, (int, float, str)):
+            note = notes.get(k)
+            value = _fmt(v) if isinstance(v, (int, float)) else v
+            rows.append(f"| {k} (as reported by the source) | {value}"
+                        + (f" ({note})" if isinstance(note, str) else "") + " |")
+    return rows
 
 
 def _mean(values: np.ndarray) -> float | None:

@@ -26,12 +26,16 @@ directory under ``rollouts/`` and renamed; JSON files are replaced with ``os.rep
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import json
+import math
 import os
 import re
 import shutil
 import tempfile
 import threading
+import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Literal, Mapping
@@ -190,16 +194,51 @@ def is_rollout(path: str | Path) -> bool:
     return (Path(path) / ROLLOUT_FILE).is_file()
 
 
-def read_json_object(path: Path) -> dict[str, Any]:
-    """Parse a JSON file that must hold an object; errors name the file."""
+def read_json(path: Path) -> Any:
+    """Parse a JSON file as the standard defines JSON; every failure is an :class:`InspectorError`
+    naming the file (and the field, for a NaN or Infinity, which JSON does not have).
+
+    Raises:
+        InspectorError: missing, not a regular file, unreadable, not UTF-8, not JSON, nested past
+            the parser's depth, an integer past Python's digit limit, or a non-finite number.
+    """
     if not path.is_file():
-        raise InspectorError(path, "file not found")
+        raise InspectorError(path, "is a directory, not a file" if path.is_dir() else "file not found")
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(path.read_bytes())
+    except OSError as exc:
+        raise InspectorError(path, f"cannot read ({exc.strerror or exc})") from None
     except (ValueError, RecursionError) as exc:  # bad UTF-8, bad JSON, an int of 5000 digits, [[[[...
         raise InspectorError(path, f"invalid JSON ({type(exc).__name__}: {exc})") from None
+    found = _first_non_finite(data)
+    if found is not None:
+        raise InspectorError(path, f"{found[0]}: non-finite number {found[1]} (JSON has no NaN or Infinity)")
+    return data
+
+
+def read_json_object(path: Path) -> dict[str, Any]:
+    """:func:`read_json` of a file that must hold an object."""
+    data = read_json(path)
     require(isinstance(data, dict), path, f"expected a JSON object, found {type(data).__name__}")
     return data
+
+
+def _first_non_finite(data: Any) -> tuple[str, float] | None:
+    """(field, value) of the first NaN/Infinity in document order, e.g. ``("per_joint_rmse[2]", nan)``.
+
+    Iterative: a document as deep as the parser allows must not exhaust the stack here.
+    """
+    stack: list[tuple[str, Any]] = [("(top level)", data)]
+    while stack:
+        where, value = stack.pop()
+        if isinstance(value, float) and not math.isfinite(value):
+            return where, value
+        top = "" if where == "(top level)" else where
+        if isinstance(value, dict):
+            stack.extend((f"{top}.{k}" if top else str(k), v) for k, v in reversed(list(value.items())))
+        elif isinstance(value, list):
+            stack.extend((f"{top}[{i}]", v) for i, v in reversed(list(enumerate(value))))
+    return None
 
 
 def open_session(root: str | Path, check: Callable[[Path], None] | None = None, lazy: bool = False) -> Session:
@@ -495,8 +534,9 @@ def _type_names(kind: type | tuple[type, ...]) -> str:
 def write_json_atomic(path: Path, data: Any) -> None:
     """Write JSON so that the file is either the old one or the complete new one."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{_short(path.name)}.", suffix=".tmp", dir=path.parent)
     try:
+        os.fchmod(fd, 0o666 & ~process_umask())  # as open() would create it, not mkstemp's 0600
         with os.fdopen(fd, "w") as fh:
             json.dump(data, fh, indent=2, allow_nan=False)
             fh.write("\n")
@@ -508,17 +548,87 @@ def write_json_atomic(path: Path, data: Any) -> None:
         raise
 
 
-def _replace_dir(staged: Path, dest: Path, overwrite: bool) -> None:
-    """Move a complete staged directory to ``dest``; an old ``dest`` goes only once the new is in."""
-    if dest.exists():
-        if not overwrite and any(dest.iterdir()):
-            raise InspectorError(dest, "already exists (pass overwrite=True / --overwrite to replace it)")
-        trash = dest.with_name(f".{dest.name}.old-{os.getpid()}")
+def process_umask() -> int:
+    """The process's umask, read without changing it (setting it, even briefly, races other threads)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)  # no /proc (not Linux): the classic read-back
+    os.umask(mask)
+    return mask
+
+
+def make_staging_dir(dest: Path) -> Path:
+    """A fresh hidden sibling of ``dest`` to build it in (``.<name>.<random>.partial``), with the
+    mode ``mkdir`` would give (``mkdtemp``'s 0700 would stick to the directory once renamed)."""
+    staged = Path(tempfile.mkdtemp(prefix=f".{_short(dest.name)}.", suffix=".partial", dir=dest.parent))
+    os.chmod(staged, 0o777 & ~process_umask())
+    return staged
+
+
+def _short(name: str) -> str:
+    """A name short enough to prefix a temporary name (NAME_MAX is 255 bytes)."""
+    return name.encode("utf-8", "surrogateescape")[:64].decode("utf-8", "ignore")
+
+
+def check_replaceable(dest: Path, overwrite: bool, kind: str, marker: str) -> bool:
+    """Decide what a write may do at ``dest``, the one rule for sessions and rollouts.
+
+    Free to write: ``dest`` does not exist, or is an empty directory. With ``overwrite``, also
+    a directory that holds ``marker`` (``session.json`` / ``rollout.json``). Anything else (a
+    file, a symbolic link, a directory that is not a ``kind``) is the user's and is never
+    replaced.
+
+    Returns:
+        True when ``dest`` holds a ``kind`` that the write will replace.
+
+    Raises:
+        InspectorError: ``dest`` may not be replaced.
+    """
+    if not os.path.lexists(dest):
+        return False
+    if dest.is_symlink() or not dest.is_dir():
+        what = "a symbolic link" if dest.is_symlink() else "a file"
+        raise InspectorError(dest, f"exists and is {what}, not a {kind}; refusing to replace it")
+    if not any(dest.iterdir()):
+        return False
+    if not overwrite:
+        raise InspectorError(dest, "already exists (pass overwrite=True / --overwrite to replace it)")
+    if not (dest / marker).is_file():
+        raise InspectorError(dest, f"is not a {kind} (no {marker}); --overwrite replaces only a {kind}, "
+                                   "refusing to delete this directory")
+    return True
+
+
+def _replace_dir(staged: Path, dest: Path, overwrite: bool, kind: str, marker: str) -> None:
+    """Move a complete staged directory to ``dest``; an old ``dest`` goes only once the new is in.
+
+    Raises:
+        InspectorError: ``dest`` may not be replaced (:func:`check_replaceable`), or another
+            write took the place meanwhile. ``staged`` is left for the caller to remove.
+    """
+    if check_replaceable(dest, overwrite, kind, marker):
+        trash = dest.with_name(f".{_short(dest.name)}.old-{uuid.uuid4().hex[:8]}")
         os.replace(dest, trash)
-        os.replace(staged, dest)
+        try:
+            os.replace(staged, dest)
+        except OSError:
+            with contextlib.suppress(OSError):
+                os.replace(trash, dest)  # put the old one back
+            raise InspectorError(dest, f"another write replaced this {kind} at the same time; "
+                                       "this one was dropped") from None
         shutil.rmtree(trash, ignore_errors=True)
-    else:
-        os.replace(staged, dest)
+        return
+    try:
+        os.replace(staged, dest)  # onto nothing, or onto an empty directory
+    except OSError as exc:
+        if exc.errno in (errno.ENOTEMPTY, errno.EEXIST, errno.ENOTDIR, errno.EISDIR):
+            raise InspectorError(dest, f"appeared while this {kind} was written (another write to "
+                                       "the same place?); this one was dropped") from None
+        raise
 
 
 class SessionWriter:
@@ -551,25 +661,28 @@ class SessionWriter:
                repo_id: str | None = None, overwrite: bool = False) -> "SessionWriter":
         """Start a new session at ``dest`` (staged in a temporary sibling until committed)."""
         dest = Path(dest)
-        if dest.exists() and not overwrite and (not dest.is_dir() or any(dest.iterdir())):
-            raise InspectorError(dest, "already exists (pass overwrite=True / --overwrite to replace it)")
+        check_replaceable(dest, overwrite, "session", SESSION_FILE)  # refuse before any work
         dest.parent.mkdir(parents=True, exist_ok=True)
-        staged = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".partial", dir=dest.parent))
+        staged = make_staging_dir(dest)
         gt_source: dict[str, Any] = {}
         if dataset is not None:
             gt_source["dataset"] = str(dataset)
         if repo_id is not None:
             gt_source["repo_id"] = repo_id
-        write_json_atomic(staged / SESSION_FILE, {
-            "schema": SCHEMA,
-            "name": name or dest.name,
-            "robot": "so101",
-            "units": units.to_json(),
-            "joint_names": list(JOINT_NAMES),
-            "gt_source": gt_source,
-            "model": dict(model or {}),
-        })
-        (staged / ROLLOUTS_DIR).mkdir()
+        try:
+            write_json_atomic(staged / SESSION_FILE, {
+                "schema": SCHEMA,
+                "name": name or dest.name,
+                "robot": "so101",
+                "units": units.to_json(),
+                "joint_names": list(JOINT_NAMES),
+                "gt_source": gt_source,
+                "model": dict(model or {}),
+            })
+            (staged / ROLLOUTS_DIR).mkdir()
+        except BaseException:
+            shutil.rmtree(staged, ignore_errors=True)
+            raise
         return cls(staged, dest, units, overwrite)
 
     @classmethod
@@ -588,10 +701,18 @@ class SessionWriter:
             self.abort()
 
     def commit(self) -> Path:
-        """Move a new session into place. Returns its final path."""
+        """Move a new session into place. Returns its final path.
+
+        A commit that fails (the place was taken meanwhile, a rename failed) drops the staged
+        session: nothing is left behind but what was at the destination before.
+        """
         if self._final is None:
             return self.root
-        _replace_dir(self.root, self._final, self._overwrite)
+        try:
+            _replace_dir(self.root, self._final, self._overwrite, "session", SESSION_FILE)
+        except BaseException:
+            self.abort()
+            raise
         self.root, self._final = self._final, None
         return self.root
 
@@ -644,7 +765,7 @@ class SessionWriter:
             raise InspectorError((self._final or self.root) / ROLLOUTS_DIR / tag,
                                  f"rollout {tag!r} already exists in this session")
         actions_arr = np.asarray(actions, dtype=np.float64)
-        staged = Path(tempfile.mkdtemp(prefix=f".{tag}.", suffix=".partial", dir=self.root / ROLLOUTS_DIR))
+        staged = make_staging_dir(dest)
         try:
             np.save(staged / ACTIONS_FILE, actions_arr)
             if states is not None:
@@ -673,12 +794,16 @@ class SessionWriter:
                 meta["extra"] = dict(extra)
             write_json_atomic(staged / ROLLOUT_FILE, meta)
             load_rollout(staged, self.units)  # validate before it becomes visible
-            _replace_dir(staged, dest, overwrite)
-        except InspectorError as exc:
+            _replace_dir(staged, dest, overwrite, "rollout", ROLLOUT_FILE)
+        except (InspectorError, OSError) as exc:  # bad data, or a write error (disk full, ...)
             shutil.rmtree(staged, ignore_errors=True)
+            if isinstance(exc, InspectorError):
+                file, what = exc.file, exc.what
+            else:
+                file, what = str(exc.filename or staged), exc.strerror or str(exc)
             # name the file where it would have been, not in the temporary directory that is gone
             final = (self._final or self.root) / ROLLOUTS_DIR / tag
-            raise InspectorError(exc.file.replace(str(staged), str(final)), exc.what) from None
+            raise InspectorError(file.replace(str(staged), str(final)), what) from None
         except BaseException:
             shutil.rmtree(staged, ignore_errors=True)
             raise

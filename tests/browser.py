@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import shutil
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 CHROMIUM = Path("/usr/bin/chromium")
@@ -12,9 +12,12 @@ CHROMIUM_ARGS = [
     "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
     "--disable-background-networking", "--disable-component-update", "--disable-sync",
 ]
-SCENE_TIMEOUT_S = 20.0
-# The first page of a browser compiles its WebGL shaders in software: allow for it.
-PAGE_TIMEOUT_S = 60.0
+# Rerun's web viewer needs WebGL2: SwiftShader renders it on the CPU when there is no GPU.
+SWIFTSHADER_ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+SCENE_TIMEOUT_S = 60.0
+# The first page of a browser compiles its WebGL shaders in software, on a machine that may be
+# busy with other work: allow for it (a deadline, not a wait).
+PAGE_TIMEOUT_S = 120.0
 
 
 def skip_reason() -> str | None:
@@ -28,10 +31,19 @@ def skip_reason() -> str | None:
     return None
 
 
-def launch(playwright):
-    """Launch the system Chromium headless."""
+def launch(playwright, extra_args: Sequence[str] = ()):
+    """Launch the system Chromium headless (``extra_args``, e.g. :data:`SWIFTSHADER_ARGS`)."""
     exe = str(CHROMIUM) if CHROMIUM.is_file() else shutil.which("chromium")
-    return playwright.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS, headless=True)
+    return playwright.chromium.launch(executable_path=exe, args=[*CHROMIUM_ARGS, *extra_args], headless=True)
+
+
+def open_page(browser, width: int, height: int):
+    """A new page whose actions (click, fill, wait_for_selector) may take up to
+    :data:`PAGE_TIMEOUT_S`: Playwright's default 30 s is too short when several software-rendered
+    pages share a busy 2-core machine."""
+    page = browser.new_page(viewport={"width": width, "height": height})
+    page.set_default_timeout(PAGE_TIMEOUT_S * 1000)
+    return page
 
 
 def wait_until(condition: Callable[[], object], timeout: float = SCENE_TIMEOUT_S, interval: float = 0.1,

@@ -6,6 +6,12 @@ import os
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, settings
+
+# The suite runs on a shared 2-core machine: drawing an example may be slow because the machine
+# is, which says nothing about the test. Tests that list their own suppressions add too_slow.
+settings.register_profile("shared-machine", suppress_health_check=[HealthCheck.too_slow], deadline=None)
+settings.load_profile("shared-machine")
 
 # The repo sits at <work>/main and the shared fixtures at <work>/shared/fixtures.
 FIXTURES_DIR = Path(__file__).resolve().parents[2] / "shared" / "fixtures"

@@ -19,6 +19,7 @@ from browser import (
     hide_software_webgl_notice,
     launch,
     open_app,
+    open_page,
     page_client_id,
     select_option,
     skip_reason,
@@ -56,7 +57,7 @@ def browser():
 
 def new_page(browser, app, width: int = 1600, height: int = 1000):
     """A fresh page on the app and the server-side TabState it got."""
-    page = browser.new_page(viewport={"width": width, "height": height})
+    page = open_page(browser, width, height)
     open_app(page, app.url)
     return page, page_tab(page, app)
 

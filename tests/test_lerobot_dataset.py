@@ -437,7 +437,7 @@ def pristine_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
                                  [_synthetic_episode(4, "a", 0, cameras=("front",), size=(16, 16))])
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(where=st.sampled_from(_FIELDS), value=_json_values)
 def test_malformed_info_never_crashes(pristine_root: Path, where: tuple[str, ...], value: object) -> None:
     info_path = pristine_root / INFO_PATH

@@ -353,6 +353,71 @@ def _dest_under_file(ws: Workspace, d: Path) -> list[Any]:
     return ["import", "dreamzero-so101", ws.source(d, SC), "-o", d / "out" / "file" / "session"]
 
 
+def _overwrite_onto(kind: str) -> Callable[[Workspace, Path], list[Any]]:
+    """``import --overwrite`` onto what is at ``out/session``: a directory of the user's files,
+    a regular file, or a session (the only thing ``--overwrite`` may replace)."""
+    def build(ws: Workspace, d: Path) -> list[Any]:
+        dest = d / "out" / "session"
+        if kind == "directory":
+            dest.mkdir()
+            (dest / "keep.txt").write_text("mine")
+        elif kind == "file":
+            dest.write_text("mine")
+        else:
+            copy_tree(ws.zs3, dest)
+        return ["import", "dreamzero-so101", ws.source(d, SC), "-o", dest, "--overwrite"]
+    return build
+
+
+def _check_file_untouched(run: Run) -> None:
+    assert (run.dir / "out" / "session").read_text() == "mine"
+
+
+def _check_session_replaced(run: Run) -> None:
+    s = open_session(run.dir / "out" / "session")
+    assert sorted(s.rollouts) == ["f084"] and not s.errors  # the old session's f000, f169 are gone
+
+
+# a newline, an escape sequence (a terminal colour) and a Unicode line separator
+CONTROL_NAME = "ep\n000\x1b[31m\u2028"
+CONTROL_NAME_ESCAPED = r"ep\n000\x1b[31m\u2028"  # as the error line writes it
+
+
+def _control_chars_in_path(ws: Workspace, d: Path) -> list[Any]:
+    src = copy_tree(ws.dz / AR, d / "src" / CONTROL_NAME)
+    truncate(src / _AR_TRACE)
+    return ["import", "dreamzero-so101", src, "-o", d / "out" / "session"]
+
+
+NON_ASCII_NAME, LONG_NAME = "épisode_日本", "a" * 250
+
+
+def _odd_source_names(ws: Workspace, d: Path) -> list[Any]:
+    copy_tree(ws.dz / SC, d / "src" / NON_ASCII_NAME)
+    copy_tree(ws.dz / "zeroshot_chunk" / "f169", d / "src" / LONG_NAME)
+    return ["import", "dreamzero-so101", d / "src", "-o", d / "out" / "session"]
+
+
+def _check_odd_source_names(run: Run) -> None:
+    from inspector.session import _TAG
+
+    s = open_session(run.dir / "out" / "session")
+    assert not s.errors and len(s.rollouts) == 2
+    names = {tag: r.extra["source"]["name"] for tag, r in s.rollouts.items()}
+    assert all(_TAG.match(tag) and len(tag) <= 128 for tag in names), names
+    assert sorted(names.values()) == sorted([NON_ASCII_NAME, LONG_NAME])  # the original names are kept
+    assert names.get("episode") == NON_ASCII_NAME, names
+
+
+def _report_long_named_source(ws: Workspace, d: Path) -> list[Any]:
+    return ["report", copy_tree(ws.dz / SC, d / "src" / LONG_NAME), "--json"]
+
+
+def _check_long_named_report(run: Run) -> None:
+    (row,) = run.json()["rollouts"]
+    assert row["tag"] == "a" * 119 + "_" + row["tag"][-8:]
+
+
 def _import_with_dataset(rel: str, mutate_ds: Callable[[Path], Any], *extra: Any):
     def build(ws: Workspace, d: Path) -> list[Any]:
         ds = ws.dataset(d)
@@ -448,7 +513,7 @@ CASES: list[Case] = [
     _imp("import-episode-length-string", AR, lambda s: edit_json(s / "meta.json", episode_length="x"),
          "meta.json", "episode_length: expected a positive integer"),
     _imp("import-sc-actions-nan", SC, lambda s: edit_json(s / "meta.json", actions_pred=[[float("nan")] * 6] * 24),
-         "meta.json", "actions_pred: non-finite"),
+         "meta.json", "actions_pred[0][0]: non-finite number nan"),
     _imp("import-sc-actions-ragged", SC, lambda s: edit_json(s / "meta.json", actions_pred=[[1] * 6] * 23 + [[1] * 5]),
          "meta.json", "actions_pred: expected a (horizon, 6) list of numbers"),
     _imp("import-sc-actions-missing-key", SC, lambda s: drop_json_key(s / "meta.json", "actions_pred"),
@@ -457,12 +522,19 @@ CASES: list[Case] = [
          "meta.json", "actions_gt: shape (12, 6) differs"),
     _imp("import-sc-predicted-frames-zero", SC, lambda s: edit_json(s / "meta.json", predicted_frames=0),
          "meta.json", "predicted_frames: must be >= 1"),
+    _imp("import-meta-nan", SC, lambda s: edit_json(s / "meta.json", video_psnr_db=float("nan")),
+         "meta.json", "video_psnr_db: non-finite number nan"),
+    _imp("import-meta-infinity-in-a-list", SC,
+         lambda s: edit_json(s / "meta.json", per_joint_rmse=[1.0, 2.0, float("-inf")]),
+         "meta.json", "per_joint_rmse[2]: non-finite number -inf"),
+    _imp("import-meta-state-nan", AR, lambda s: edit_json(s / "meta.json", initial_state=[float("nan")] * 6),
+         "meta.json", "initial_state[0]: non-finite number nan"),
     # ---------------------------------------------------------------- import: video
     _imp("import-video-truncated", AR, lambda s: truncate(s / "rollout_front.mp4"), "rollout_front.mp4", "cannot read video"),
     _imp("import-video-not-a-video", AR, lambda s: (s / "rollout_front.mp4").write_text("not a video"),
          "rollout_front.mp4", "cannot read video"),
     _imp("import-sc-pred-video-truncated", SC, lambda s: truncate(s / "pred_top.mp4", 0.3), "pred_top.mp4", "cannot read video"),
-    _imp("import-mosaic-truncated", MOSAIC, lambda s: truncate(s / "gt_future.mp4"), "gt_future.mp4", "cannot decode video"),
+    _imp("import-mosaic-truncated", MOSAIC, lambda s: truncate(s / "gt_future.mp4"), "gt_future.mp4", "cannot read video"),
     # ---------------------------------------------------------------- import: paths, dataset
     Case("import-empty-source-dir", lambda ws, d: ["import", "dreamzero-so101", (d / "empty").mkdir() or d / "empty",
                                                    "-o", d / "out" / "session"],
@@ -472,6 +544,17 @@ CASES: list[Case] = [
     Case("import-dest-exists", _dest_exists, file="out/session", field="already exists", out=("session",),
          check=_check_dest_untouched),
     Case("import-dest-under-a-file", _dest_under_file, file="out/file", field="File exists", out=("file",)),
+    Case("import-overwrite-refuses-a-plain-directory", _overwrite_onto("directory"), file="out/session",
+         field="is not a session (no session.json)", out=("session",), check=_check_dest_untouched),
+    Case("import-overwrite-refuses-a-file", _overwrite_onto("file"), file="out/session",
+         field="exists and is a file, not a session", out=("session",), check=_check_file_untouched),
+    Case("import-overwrite-replaces-a-session", _overwrite_onto("session"), rc=0, out=("session",),
+         check=_check_session_replaced),
+    Case("import-control-characters-in-path", _control_chars_in_path, file=f"src/{CONTROL_NAME_ESCAPED}/action_trace.npy",
+         field="not a readable .npy"),
+    Case("import-non-ascii-and-long-source-names", _odd_source_names, rc=0, out=("session",),
+         check=_check_odd_source_names),
+    Case("report-raw-source-with-a-long-name", _report_long_named_source, rc=0, check=_check_long_named_report),
     Case("import-dataset-episode-beyond", _import_with_dataset(SC, lambda ds: None, "--episode", "9"),
          file="so101_v30", field="episode 9 is out of range"),
     Case("import-dataset-start-frame-beyond", _import_with_dataset("zeroshot_chunk/f169", lambda ds: None, "--episode", "0"),
@@ -786,10 +869,12 @@ def test_app_catalog_broken_rollouts_are_errors(ws: Workspace, tmp_path: Path) -
                     catalog.load(key)
                 except InspectorError as exc:  # anything else would escape and fail the test
                     failed[key] = str(exc)
-            assert sorted(failed) == ["ds / r0", "ds / r1", "zs3 / f084", "zs3 / f169"]
+            assert sorted(failed) == ["ds / r0", "zs3 / f084", "zs3 / f169"]
             assert "f084/actions.npy" in failed["zs3 / f084"] and "non-finite" in failed["zs3 / f084"]
             assert "views: listed twice" in failed["zs3 / f169"]
-            assert "start_frame 500" in failed["ds / r0"] and "episode_index 9" in failed["ds / r1"]
+            assert "start_frame 500" in failed["ds / r0"]
+            no_episode = catalog.load("ds / r1").timeline
+            assert not no_episode.has_gt_joints and "no episode 9" in no_episode.gt.warning
             assert all("\n" not in m for m in failed.values())
             # a failed build is retried on the next open, and fails the same clean way
             with pytest.raises(InspectorError):

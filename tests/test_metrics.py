@@ -55,6 +55,33 @@ def test_video_psnr_front_f084_matches_meta(imported_session):
     assert psnr == pytest.approx(r.extra["reference_metrics"]["video_psnr_db"], abs=0.3)
 
 
+def test_mosaic_sample_front_psnr_and_the_sources_figure(imported_session):
+    """``demo/train_ep0``: ``gt_future.mp4`` is the front camera alone, so the front view has GT
+    (PSNR ~18 dB, not the 4.5-10 dB of a GT cut as a mosaic) and top / gripper have none. The
+    meta's ``video_psnr_db`` (~4.8 dB, the whole mosaic against the front view) is shown as the
+    source's figure with its note, on the app's card and in the recording's description."""
+    from inspector.app._cards import headline_metrics
+    from inspector.export_description import describe
+
+    r = open_session(imported_session).rollouts["train_ep0"]
+    tl = build_timeline(r)
+    assert tl.gt.views == ["front"]
+    front = tl.video_metrics("front").mean_psnr_db
+    assert 17.0 < front < 19.0, front
+    source = r.extra["reference_metrics"]["video_psnr_db"]
+    assert source == pytest.approx(4.81, abs=0.01)
+    note = r.extra["reference_notes"]["video_psnr_db"]
+    assert "mosaic" in note and "front camera alone" in note and "\n" not in note
+    rows = dict(headline_metrics(tl))
+    assert "video_psnr_db" not in rows["reported by the evaluation"]  # not among the plain figures
+    assert rows["source's video_psnr_db"] == f"{source:.2f}: {note}"
+    text = describe(tl, {"front": front, "top": None, "gripper": None})
+    assert f"| video_psnr_db (as reported by the source) | 4.8 ({note}) |" in text
+    assert "| mean video PSNR, front | " + f"{front:.1f} dB |" in text
+    # a sample with per-view GT files has no such note: its meta compared one view with its GT
+    assert "reference_notes" not in open_session(imported_session).rollouts["f084"].extra
+
+
 def test_raw_60_chunk_rollouts_leave_the_joint_limits(imported_session):
     s = open_session(imported_session)
     for tag in ["ep000_train", "ep000_novel"]:

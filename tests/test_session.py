@@ -82,7 +82,7 @@ def _edit(rollout_dir: Path, **fields) -> None:
     (rollout_dir / "rollout.json").write_text(json.dumps(meta))
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(st.dictionaries(st.sampled_from(["kind", "horizon", "executed_per_chunk", "frames_per_chunk", "fps",
                                         "start_frame", "episode_index", "views", "gt", "prompt", "extra"]),
                        st.one_of(st.none(), st.booleans(), st.integers(-5, 50), st.floats(allow_nan=True),
@@ -112,13 +112,15 @@ def test_importer_reads_every_fixture_dir(imported_session):
     assert train.gt_episode_length == 328 and train.prompt == "Pick the red cube"
     f084 = s.rollouts["f084"]
     assert f084.kind == "single_chunk" and f084.start_frame == 84 and f084.gt_actions.shape == (24, 6)
-    mosaic = s.rollouts["train_ep0"]  # GT only as a 2x2 mosaic: cut into views
-    assert mosaic.gt_views == ["front", "gripper", "top"]
-    # each mosaic quarter is one view; GT frames are scaled to the imagined clip's size to compare
+    mosaic = s.rollouts["train_ep0"]  # gt_future.mp4 beside the mosaic: the front camera alone
+    assert mosaic.views == ["front", "gripper", "top"] and mosaic.gt_views == ["front"]
+    assert mosaic.extra["source"]["name"] == "train_ep0"
+    # GT frames are scaled to the imagined clip's size to compare; the front view matches it
     from inspector.timeline import build_timeline
 
     psnr = build_timeline(mosaic).video_metrics("front").psnr_db
     assert len(psnr) == len(mosaic.video("front")) and np.isfinite(psnr).all()
+    assert 15 < float(np.mean(psnr)) < 22  # a mosaic read as GT would score 4-10 dB
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:
@@ -193,3 +195,134 @@ def test_info_on_a_session_says_model_units_and_gt(tmp_path):
     assert " single_chunk " in single and " - " in single  # no "executed" for a single chunk
     version = subprocess.run([sys.executable, "-m", "inspector", "--version"], capture_output=True, text=True)
     assert version.returncode == 0 and version.stdout.startswith("inspector ")
+
+
+# ----------------------------------------------------------------------------------------------
+# What a write may replace, and what it leaves behind
+
+
+@pytest.mark.parametrize("what", ["file", "directory", "symlink"])
+def test_overwrite_replaces_only_a_session(tmp_path, what):
+    """``overwrite=True`` (``import --overwrite``) replaces a session and nothing else: a file,
+    a directory of the user's own files, a link to a session are refused and left as they were."""
+    dest = tmp_path / "dest"
+    if what == "file":
+        dest.write_text("mine")
+    elif what == "directory":
+        dest.mkdir()
+        (dest / "notes.txt").write_text("mine")
+    else:
+        dest.symlink_to(_write_small_session(tmp_path / "real"), target_is_directory=True)
+    with pytest.raises(InspectorError, match="refusing") as err:
+        _write_small_session(dest, overwrite=True)
+    assert "\n" not in str(err.value)
+    if what == "file":
+        assert dest.read_text() == "mine"
+    elif what == "directory":
+        assert [p.name for p in dest.iterdir()] == ["notes.txt"]
+    else:
+        assert dest.is_symlink() and sorted(open_session(dest).rollouts) == ["a", "b"]
+    assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
+    # a session is replaced, an empty directory is simply used
+    root = _write_small_session(tmp_path / "s")
+    with SessionWriter.create(root, overwrite=True) as w:
+        w.add_rollout("c", kind="single_chunk", actions=np.zeros((1, 24, 6)))
+    assert sorted(open_session(root).rollouts) == ["c"]
+    (tmp_path / "empty").mkdir()
+    assert sorted(open_session(_write_small_session(tmp_path / "empty")).rollouts) == ["a", "b"]
+
+
+def test_rollout_overwrite_replaces_only_a_rollout(tmp_path):
+    root = _write_small_session(tmp_path / "s")
+    (root / "rollouts" / "mine").mkdir()
+    (root / "rollouts" / "mine" / "data.csv").write_text("1,2")
+    with SessionWriter.append(root) as w:
+        with pytest.raises(InspectorError, match="is not a rollout"):
+            w.add_rollout("mine", kind="single_chunk", actions=np.zeros((1, 24, 6)), overwrite=True)
+        w.add_rollout("b", kind="single_chunk", actions=np.ones((1, 24, 6)), overwrite=True)
+    assert (root / "rollouts" / "mine" / "data.csv").read_text() == "1,2"
+    assert open_session(root).rollouts["b"].actions.max() == 1.0
+    assert not [p for p in (root / "rollouts").iterdir() if p.name.startswith(".")]
+
+
+def test_concurrent_imports_to_one_destination_leave_no_staging(dreamzero_dir, tmp_path):
+    """Imports racing to one destination: one session results (complete), every other import
+    exits 2 with one line, and no ``.<name>.*.partial`` staging directory (or ``.old-``) is left."""
+    src = dreamzero_dir / "zeroshot_chunk" / "f084"
+    dest = tmp_path / "out" / "s"
+    for extra in ([], ["--overwrite"]):
+        procs = [subprocess.Popen([sys.executable, "-m", "inspector", "import", "dreamzero-so101", str(src),
+                                   "-o", str(dest), *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                  text=True) for _ in range(4)]
+        results = [(p.wait(timeout=300), p.stdout.read(), p.stderr.read()) for p in procs]
+        for p in procs:
+            p.stdout.close()
+            p.stderr.close()
+        ok = [r for r in results if r[0] == 0]
+        assert ok and all(rc in (0, 2) for rc, _, _ in results), results
+        for rc, _, err in results:
+            if rc == 2:
+                assert err.startswith(f"error: {dest}: ") and err.count("\n") == 1, err
+        if not extra:
+            assert len(ok) == 1, results  # without --overwrite only the first one in lands
+        assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["s"]
+        s = open_session(dest)
+        assert sorted(s.rollouts) == ["f084"] and not s.errors
+
+
+def test_commit_that_loses_the_race_leaves_nothing(tmp_path):
+    """The writer API: a session whose place was taken while it was written is dropped whole."""
+    dest = tmp_path / "s"
+    w = SessionWriter.create(dest)
+    w.add_rollout("a", kind="single_chunk", actions=np.zeros((1, 24, 6)))
+    _write_small_session(dest)  # another writer got there first
+    with pytest.raises(InspectorError, match="already exists"):
+        with w:
+            pass
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s"]
+    assert sorted(open_session(dest).rollouts) == ["a", "b"]
+
+
+@pytest.mark.parametrize("umask", [0o022, 0o027])
+def test_written_files_have_the_usual_mode(tmp_path, umask):
+    """Session files and directories get the mode the umask gives (not mkstemp's 0600 or
+    mkdtemp's 0700), so a session written for a team is readable by it."""
+    import os
+    import stat
+
+    old = os.umask(umask)
+    try:
+        root = _write_small_session(tmp_path / "s")
+        from inspector.app._annotations import update_annotation
+
+        update_annotation(root, "a", flag=True)
+    finally:
+        os.umask(old)
+    for path in [root, *root.rglob("*")]:
+        if path.name.startswith(".annotations.lock"):
+            continue
+        mode = stat.S_IMODE(path.stat().st_mode)
+        expected = (0o777 if path.is_dir() else 0o666) & ~umask
+        assert mode == expected, f"{path.relative_to(tmp_path)}: {oct(mode)}, expected {oct(expected)}"
+
+
+# ----------------------------------------------------------------------------------------------
+# Error lines
+
+
+@settings(max_examples=200, deadline=None)
+@given(path=st.text(min_size=1), what=st.text())
+def test_error_is_one_printable_line_whatever_the_path(path, what):
+    """A path or message with newlines, escape sequences, bidi overrides or undecodable bytes
+    still makes one line, with those characters written as escapes."""
+    import unicodedata
+
+    message = str(InspectorError(path, what))
+    assert message.splitlines() == [message]
+    assert not [c for c in message if unicodedata.category(c) in ("Cc", "Cf", "Cs", "Zl", "Zp")]
+    assert InspectorError(path, what).file == path  # kept as given for programs
+
+
+def test_error_escapes_control_characters():
+    err = InspectorError("/data/ep\n0\x1b[31m\u2028\udcff/meta.json", "bad\n thing")
+    assert str(err) == "/data/ep\\n0\\x1b[31m\\u2028\\udcff/meta.json: bad thing"

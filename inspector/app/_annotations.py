@@ -21,7 +21,6 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
-import json
 import os
 from collections.abc import Iterator
 from datetime import datetime, timezone
@@ -29,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InspectorError
-from ..session import ANNOTATIONS_FILE, write_json_atomic
+from ..session import ANNOTATIONS_FILE, read_json, write_json_atomic
 
 SCHEMA = "inspector.annotations/1"
 LOCK_FILE = ".annotations.lock"
@@ -79,22 +78,55 @@ def _remove_stale_temps(root: Path) -> None:
 def read_annotations(session_root: str | Path) -> dict[str, Any]:
     """The session's annotations (an empty document when the file does not exist yet).
 
+    Everything in a file that exists is checked before use (it may have been edited by hand, or
+    be hostile): JSON the standard allows, within the parser's depth and integer limits, and the
+    layout above (extra keys are kept). A file that fails is reported and never overwritten.
+
     Raises:
-        InspectorError: the file exists but is not valid annotations JSON, or leads outside the
-            session directory.
+        InspectorError: the file exists but is not valid annotations JSON (or not a file), or
+            leads outside the session directory.
     """
     path = annotations_path(session_root)
-    if not path.is_file():
+    if not os.path.lexists(path):
         return {"schema": SCHEMA, "rollouts": {}}
     try:
-        data = json.loads(path.read_text())
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InspectorError(path, f"invalid JSON ({exc}); not overwriting it") from None
-    if not isinstance(data, dict) or not isinstance(data.get("rollouts", {}), dict):
-        raise InspectorError(path, "rollouts: expected an object; not overwriting it")
+        data = read_json(path)
+        _check_layout(data)
+    except InspectorError as exc:
+        raise InspectorError(path, f"{exc.what}; not overwriting it") from None
     data.setdefault("schema", SCHEMA)
     data.setdefault("rollouts", {})
     return data
+
+
+def _check_layout(data: Any) -> None:
+    """Raise an :class:`InspectorError` naming the first field that breaks the layout."""
+    def fail(field: str, expected: str, found: Any) -> None:
+        shown = type(found).__name__ if isinstance(found, (dict, list)) else repr(found)[:40]
+        raise InspectorError(ANNOTATIONS_FILE, f"{field}: expected {expected}, found {shown}")
+
+    def check_entry(entry: Any, field: str) -> None:
+        if not isinstance(entry, dict):
+            fail(field, "an object", entry)
+        for key, kind, name in (("flag", bool, "true or false"), ("note", str, "a string"),
+                                ("updated", str, "a string")):
+            if key in entry and not isinstance(entry[key], kind):
+                fail(f"{field}.{key}", name, entry[key])
+
+    if not isinstance(data, dict):
+        fail("(top level)", "an object", data)
+    rollouts = data.get("rollouts", {})
+    if not isinstance(rollouts, dict):
+        fail("rollouts", "an object", rollouts)
+    for tag, entry in rollouts.items():
+        check_entry(entry, f"rollouts.{tag}")
+        chunks = entry.get("chunks", {})
+        if not isinstance(chunks, dict):
+            fail(f"rollouts.{tag}.chunks", "an object", chunks)
+        for chunk, chunk_entry in chunks.items():
+            if not (chunk.isascii() and chunk.isdigit() and len(chunk) <= 9):
+                fail(f"rollouts.{tag}.chunks", "chunk indexes as keys", chunk)
+            check_entry(chunk_entry, f"rollouts.{tag}.chunks.{chunk}")
 
 
 def rollout_annotations(session_root: str | Path, tag: str) -> dict[str, Any]:

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..errors import InspectorError
+from ..errors import InspectorError, one_line
 from ..timeline import RolloutTimeline
 from ._frames import LOADING, READY, FramePair
 
@@ -90,12 +90,21 @@ def headline_metrics(tl: RolloutTimeline, psnr: dict[str, np.ndarray | None] | N
             rows.append(("video PSNR", ", ".join(f"{v} {m:.1f} dB" for v, m in means.items())))
         elif loading_video:
             rows.append(("video PSNR", "computing…"))
-    ref = tl.rollout.extra.get("reference_metrics") if isinstance(tl.rollout.extra, dict) else None
-    if isinstance(ref, dict):
-        shown = {k: v for k, v in ref.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
-        if shown:
-            rows.append(("reported by the evaluation",
-                         ", ".join(f"{k} {float(v):.2f}" for k, v in list(shown.items())[:4])))
+    return rows + reference_rows(tl.rollout.extra)
+
+
+def reference_rows(extra: object) -> list[tuple[str, str]]:
+    """The source's own metrics (``extra.reference_metrics``), never mixed with ours: one row of
+    plain figures, and one row per figure that comes with a note on what it measured."""
+    extra = extra if isinstance(extra, dict) else {}
+    ref, notes = extra.get("reference_metrics"), extra.get("reference_notes")
+    if not isinstance(ref, dict):
+        return []
+    notes = {k: v for k, v in notes.items() if isinstance(v, str)} if isinstance(notes, dict) else {}
+    numbers = {k: float(v) for k, v in ref.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+    plain = [f"{k} {v:.2f}" for k, v in numbers.items() if k not in notes][:4]
+    rows = [("reported by the evaluation", ", ".join(plain))] if plain else []
+    rows += [(f"source's {k}", f"{numbers[k]:.2f}: {note}") for k, note in notes.items() if k in numbers]
     return rows
 
 
@@ -172,7 +181,7 @@ def _card_table(tag: str, rows: Sequence[tuple[str, str]]) -> str:
 def error_card(title: str, error: BaseException) -> str:
     """A red card naming the file at fault and what is wrong with it."""
     if isinstance(error, InspectorError):
-        file, what = error.file, error.what
+        file, what = one_line(error.file), error.what
     else:
         file, what = "", f"{type(error).__name__}: {error}"
     file_row = f"<div><b>file</b> <code style='word-break:break-all'>{esc(file)}</code></div>" if file else ""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import sys
 import threading
 import time
 from collections.abc import Sequence
@@ -123,7 +125,8 @@ def _load_robot() -> SharedRobot:
 
 def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", port: int = 8080,
           share: bool = False, dataset: str | Path | None = None, block: bool = True,
-          cache_mb: float = DEFAULT_FRAME_CACHE_MB, use_cache: bool = True) -> InspectorApp:
+          cache_mb: float = DEFAULT_FRAME_CACHE_MB, use_cache: bool = True,
+          exit_when_stopped: bool = False) -> InspectorApp:
     """Serve sessions in the browser (the bundled demo when ``paths`` is empty).
 
     Args:
@@ -136,6 +139,10 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
         block: serve until Ctrl-C (then stop); False returns the running app at once.
         cache_mb: frame cache budget [MiB] (JPEGs sent to browsers, shared by all tabs).
         use_cache: read and keep video metrics in the on-disk metrics cache.
+        exit_when_stopped: with ``block``, end the process as soon as the app has stopped (what
+            the command line wants): the interpreter would otherwise wait for background work
+            that no one needs any more (a rollout's videos still decoding, meshes loading),
+            many seconds on a busy machine.
 
     Returns:
         The :class:`InspectorApp` (``.port``, ``.url``, ``.stop()``, ``.tabs``).
@@ -151,8 +158,37 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
         paths = [BUNDLED_DEMO]
     # no link leads out of a root; datasets are browsed episode by episode
     sources = open_sources(paths, dataset=dataset, confine=True, datasets=True)
-    app = InspectorApp(sources, host=host, port=port, cache_mb=cache_mb,
-                       metrics_cache=MetricsCache(enabled=use_cache))
+    try:
+        app = InspectorApp(sources, host=host, port=port, cache_mb=cache_mb,
+                           metrics_cache=MetricsCache(enabled=use_cache))
+    except BaseException:  # Ctrl-C while starting included: drop temporary sessions
+        sources.close()
+        raise
+    if not block:
+        try:
+            _announce(app, share)
+        except BaseException:
+            app.stop()
+            raise
+        return app
+    try:
+        _announce(app, share)
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        app.stop()
+    if exit_when_stopped:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(0)  # the app and its temporary sessions are gone: nothing is left to clean up
+    return app
+
+
+def _announce(app: InspectorApp, share: bool) -> None:
+    """Say what is served where (and the share URL when asked for)."""
+    sources = app.sources
     n_ok = sum(len(s.rollouts) for s in sources.sessions)
     n_bad = sum(len(s.errors) for s in sources.sessions)
     served = [f"{n_ok} rollout(s) from {len(sources.sessions)} session(s)"] if sources.sessions else []
@@ -164,13 +200,3 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
     if share:
         url = app.server.request_share_url(verbose=False)
         print(f"inspector: share URL {url}" if url else "inspector: no share URL could be obtained", flush=True)
-    if not block:
-        return app
-    try:
-        while True:
-            time.sleep(3600)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        app.stop()
-    return app

@@ -10,17 +10,27 @@ Source directories, found recursively under the path given::
       gt_<view>.mp4                 the real episode's video from its first frame
     <any>/<tag>/                    single chunk
       meta.json                     actions_pred, actions_gt (24, 6), state_in | state, frame_in_ep
-      pred_<view>.mp4 | predicted_video.mp4 (2x2 mosaic [front|top; gripper|black])
-      gt_<view>.mp4   | gt_future.mp4       (the same mosaic)
+      pred_<view>.mp4 | predicted_video.mp4 (2x2 mosaic [front|top; gripper|black], 640x352)
+      gt_<view>.mp4   | gt_future.mp4       (the front camera alone, 640x480 resized to 640x352:
+                                             these samples have GT video of the front view only)
 
 Values are the model's raw outputs (arm degrees, gripper 0..100) and are kept as they are:
-joint-limit violations are findings, not something to clamp away.
+joint-limit violations are findings, not something to clamp away. The metas' own metrics are
+kept as the source's figures (``extra.reference_metrics``), with a note where one is not what its
+name suggests (``extra.reference_notes``): a mosaic sample's ``video_psnr_db`` compared the whole
+mosaic with the single front view.
+
+A rollout's tag is its directory name made into a valid tag (ASCII letters, digits, ``_.-``, at
+most 128 characters); the directory's own name is kept in ``extra.source.name``.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
+import re
 import tempfile
+import unicodedata
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -33,6 +43,11 @@ from ..units import JOINT_NAMES, Units
 from ..video import decode
 
 MOSAIC_VIEWS = (("front", 0, 0), ("top", 0, 1), ("gripper", 1, 0))  # (view, row, col) of the 2x2
+PRED_MOSAIC = "predicted_video.mp4"
+GT_FRONT_ONLY = "gt_future.mp4"  # beside a mosaic: the front camera alone, not a mosaic
+MOSAIC_PSNR_NOTE = ("compared the whole 2x2 mosaic (front, top, gripper, black) with the front camera "
+                    "alone; not a per-view PSNR")
+MAX_TAG_CHARS = 128
 ROLLOUT_VIEW_PREFIX = "rollout_"
 REFERENCE_FIELDS = ("action_rmse_deg", "action_mse_deg2", "per_joint_rmse", "per_step_mse",
                     "video_psnr_db", "video_pixel_mse", "mean_drift_deg", "final_drift_deg")
@@ -107,18 +122,14 @@ def import_dreamzero(
                               model={"name": "DreamZero-SO101"},
                               dataset=str(Path(ds.root).resolve()) if ds is not None else None,
                               overwrite=overwrite) as writer:
-        with tempfile.TemporaryDirectory(prefix="inspector-import-") as scratch:
-            used: set[str] = set()
-            for source in sources:
-                tag = _unique_tag(source.path, src, used)
-                if source.kind == "autoregressive":
-                    args = _autoregressive(source.path)
-                else:
-                    args = _single_chunk(source.path, Path(scratch) / tag)
-                if ds is not None:
-                    _attach_dataset_gt(args, ds, episode, source.path)
-                writer.add_rollout(tag, **args)
-                log(_summary(tag, args))
+        used: set[str] = set()
+        for source in sources:
+            tag = _unique_tag(source.path, src, used)
+            args = _autoregressive(source.path) if source.kind == "autoregressive" else _single_chunk(source.path)
+            if ds is not None:
+                _attach_dataset_gt(args, ds, episode, source.path)
+            writer.add_rollout(tag, **args)
+            log(_summary(tag, args))
     return Path(dest)
 
 
@@ -177,7 +188,7 @@ def _autoregressive(path: Path) -> dict[str, Any]:
     )
 
 
-def _single_chunk(path: Path, scratch: Path) -> dict[str, Any]:
+def _single_chunk(path: Path) -> dict[str, Any]:
     meta_path = path / "meta.json"
     meta = read_json_object(meta_path)
     pred = _matrix_field(meta, "actions_pred", meta_path)
@@ -186,8 +197,14 @@ def _single_chunk(path: Path, scratch: Path) -> dict[str, Any]:
         require(gt.shape == pred.shape, meta_path,
                 f"actions_gt: shape {gt.shape} differs from actions_pred {pred.shape}")
     state_in = meta.get("state_in", meta.get("state"))
-    videos = _split_views(path, "pred_", "predicted_video.mp4", scratch / "pred")
-    gt_videos = _split_views(path, "gt_", "gt_future.mp4", scratch / "gt")
+    videos = _split_views(path, "pred_", PRED_MOSAIC)
+    gt_views = _views(path, "gt_", GT_FRONT_ONLY)
+    gt_videos = {v: path / f"gt_{v}.mp4" for v in gt_views}
+    if not gt_videos and (path / GT_FRONT_ONLY).is_file():
+        gt_videos = {"front": path / GT_FRONT_ONLY}
+    notes = {}
+    if (path / PRED_MOSAIC).is_file() and (path / GT_FRONT_ONLY).is_file() and "video_psnr_db" in meta:
+        notes["video_psnr_db"] = MOSAIC_PSNR_NOTE
     executed = min(9, pred.shape[0])
     frames = _int_field(meta, "predicted_frames", meta_path, default=9)
     require(frames >= 1, meta_path, f"predicted_frames: must be >= 1, found {frames}")
@@ -203,7 +220,7 @@ def _single_chunk(path: Path, scratch: Path) -> dict[str, Any]:
         videos=videos,
         gt_videos=gt_videos,
         gt_episode_length=_length_field(meta, meta_path),
-        extra=_extra(meta, path, initial_state=state_in),
+        extra=_extra(meta, path, initial_state=state_in, reference_notes=notes or None),
     )
 
 
@@ -217,8 +234,9 @@ def _views(path: Path, prefix: str, mosaic_name: str = "") -> list[str]:
     return views
 
 
-def _split_views(path: Path, prefix: str, mosaic_name: str, scratch: Path) -> dict[str, Path]:
-    """Per-view clips: the ``<prefix><view>.mp4`` files, else the 2x2 mosaic cut into views."""
+def _split_views(path: Path, prefix: str, mosaic_name: str) -> dict[str, Any]:
+    """Per-view clips: the ``<prefix><view>.mp4`` files, else the 2x2 mosaic cut into views
+    (paths, or frames for the cut views)."""
     views = _views(path, prefix, mosaic_name)
     if views:
         return {v: path / f"{prefix}{v}.mp4" for v in views}
@@ -230,7 +248,7 @@ def _split_views(path: Path, prefix: str, mosaic_name: str, scratch: Path) -> di
     out = {}
     for view, row, col in MOSAIC_VIEWS:
         out[view] = frames[:, row * h:(row + 1) * h, col * w:(col + 1) * w]
-    return out  # type: ignore[return-value]
+    return out
 
 
 def _attach_dataset_gt(args: dict[str, Any], ds: Any, episode: int | None, path: Path) -> None:
@@ -251,7 +269,8 @@ def _extra(meta: dict[str, Any], path: Path, **more: Any) -> dict[str, Any]:
     reference = {k: meta[k] for k in REFERENCE_FIELDS if k in meta}
     info = {k: meta[k] for k in ("training_task", "prompt_kind", "episode_length", "n_steps",
                                  "total_imagined_frames", "final_imagined_state") if k in meta}
-    return {"source": {"format": "dreamzero_so101", "path": str(path.resolve()), **info},
+    return {"source": {"format": "dreamzero_so101", "path": str(path.resolve()), "name": path.resolve().name,
+                       **info},
             "reference_metrics": reference, **{k: v for k, v in more.items() if v is not None}}
 
 
@@ -289,15 +308,33 @@ def _length_field(meta: dict[str, Any], path: Path) -> int | None:
 
 
 def _unique_tag(path: Path, root: Path, used: set[str]) -> str:
-    tag = path.name if path != root else root.resolve().name
-    tag = "".join(c if c.isalnum() or c in "_.-" else "_" for c in tag).lstrip("._-") or "rollout"
-    base, n = tag, 2
+    """A valid rollout tag for a source directory, unique among ``used`` (which it joins)."""
+    base = tag_from_name(path.name if path != root else root.resolve().name)
+    tag, n = base, 2
     while tag in used:
-        parent = path.parent.name
-        tag = f"{parent}_{base}" if n == 2 and parent else f"{base}_{n}"
+        parent = tag_from_name(path.parent.name) if path.parent.name else ""
+        tag = _join_tag(parent, base) if n == 2 and parent else _join_tag(base, str(n))
         n += 1
     used.add(tag)
     return tag
+
+
+def tag_from_name(name: str) -> str:
+    """A valid tag (ASCII letters, digits, ``_.-``, 1-128 characters) made from a directory name:
+    accents dropped (``épisode`` -> ``episode``), other characters -> ``_``, a name too long cut
+    and ended with a hash of the whole name (so two long names stay apart)."""
+    ascii_name = unicodedata.normalize("NFKD", name).encode("ascii", "ignore").decode("ascii")
+    tag = re.sub(r"[^A-Za-z0-9_.-]+", "_", ascii_name).lstrip("._-").rstrip("_")
+    if len(tag) > MAX_TAG_CHARS or not tag:  # too long, or nothing ASCII in it
+        digest = hashlib.sha1(name.encode("utf-8", "surrogateescape")).hexdigest()[:8]
+        tag = _join_tag(tag, digest)
+    return tag
+
+
+def _join_tag(head: str, tail: str) -> str:
+    """``head_tail`` within the tag length, cutting ``head``."""
+    head = head[: MAX_TAG_CHARS - len(tail) - 1].rstrip("._-")
+    return f"{head}_{tail}" if head else tail
 
 
 def _summary(tag: str, args: dict[str, Any]) -> str:
