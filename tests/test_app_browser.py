@@ -226,3 +226,83 @@ def _pick_rollout(app) -> str:
             if (r.kind == "autoregressive") == want_ar and has_gt == want_gt:
                 return e.tag
     return entries[0].tag
+
+
+def test_compare_shows_the_second_rollouts_video(browser, app):
+    """Training vs novel prompt: the compared rollout's imagined frames show beside the first's,
+    for every view, in the page."""
+    page, tab = new_page(browser, app)
+    open_in_page(page, tab, app, "ep000_train")
+    page.get_by_text("Compare", exact=True).first.click()  # the folder starts closed
+    select_option(page, "Compare with", key(app, "ep000_novel"))
+    wait_until(lambda: tab.compare is not None and tab.compare.frames.done.is_set(), timeout=90,
+               what="the compared rollout to load")
+    tab.set_chunk(5, 0)  # past the shared conditioning frame: the two prompts' videos differ
+    views = {"front", "gripper", "top"}
+
+    def compared_in_page() -> bool:
+        shown = frame_sources(page)
+        return {k.split("/")[0] for k in shown if k.endswith("/compare")} == views
+    wait_until(compared_in_page, timeout=60, what="the compared rollout's frames in every view")
+    shown = frame_sources(page)
+    assert all(shown[f"{v}/compare"] != shown[f"{v}/imagined"] for v in views)
+    page.close()
+
+
+def test_single_chunk_rollout_shows_the_step_slider_only(browser, app):
+    """A single-chunk sample has one chunk: no chunk slider, no prev/next/worst buttons."""
+    page, tab = new_page(browser, app)
+    open_in_page(page, tab, app, "f084")
+    assert tab.loaded.timeline.n_chunks == 1
+    chunk_slider = page.locator("label", has_text=re.compile(r"^Chunk$")).first
+    wait_until(lambda: not chunk_slider.is_visible(), what="the chunk slider to hide")
+    assert page.locator("label", has_text=re.compile(r"^Step$")).first.is_visible()  # not "Step in chunk"
+    assert not page.get_by_role("button", name="worst").is_visible()
+    thumb = slider_thumb(page, re.compile(r"^Step$"))
+    thumb.focus()
+    page.keyboard.press("ArrowRight")
+    wait_until(lambda: tab.step == 1, what="the step slider to move the tab")
+    open_in_page(page, tab, app, "ep000_train")  # and back for a chunked rollout
+    wait_until(chunk_slider.is_visible, what="the chunk slider to come back")
+    page.close()
+
+
+def _field_beside(page, label: str):
+    """The input in the same GUI row as the label ``label`` (see the xfail test below)."""
+    return page.locator("label", has_text=re.compile(f"^{re.escape(label)}$")).first.locator(
+        "xpath=ancestor::div[.//input][1]").locator("input").first
+
+
+def test_notes_are_saved_to_annotations(browser, app):
+    """Typing into the notes fields and saving writes the session's annotations.json."""
+    import json
+
+    page, tab = new_page(browser, app)
+    open_in_page(page, tab, app, "ep000_train")
+    page.get_by_text("Notes", exact=True).first.click()  # the folder starts closed
+    _field_beside(page, "Rollout note").fill("grasp slips at chunk 12")
+    _field_beside(page, "Chunk note").fill("cube out of view")
+    page.get_by_role("button", name="Save notes").click()
+    annotations = tab.loaded.entry.session.root / "annotations.json"
+
+    def saved() -> dict | None:  # the rollout's note and then the chunk's are written
+        try:
+            entry = json.loads(annotations.read_text())["rollouts"]["ep000_train"]
+        except (OSError, ValueError, KeyError):
+            return None
+        return entry if "0" in entry.get("chunks", {}) else None
+    note = wait_until(saved, what="annotations.json to be written")
+    assert note["note"] == "grasp slips at chunk 12" and note["chunks"]["0"]["note"] == "cube out of view"
+    page.close()
+
+
+@pytest.mark.xfail(strict=True, reason="viser 1.1.1's text input gets no id, so its label's for= "
+                                       "points nowhere; passes (and must be un-marked) once viser sets it")
+def test_notes_fields_are_labelled_for_assistive_tech(browser, app):
+    page, tab = new_page(browser, app)
+    page.get_by_text("Notes", exact=True).first.click()
+    label = page.locator("label", has_text=re.compile(r"^Rollout note$")).first
+    label.wait_for(state="visible")
+    target = label.get_attribute("for")
+    assert page.locator(f"[id='{target}']").count() == 1
+    page.close()
