@@ -2,7 +2,7 @@
 
 One app serves a session imported from the shared DreamZero fixtures, with one rollout broken on
 purpose (``f000``: truncated actions.npy). Set ``INSPECTOR_DOCS_SCREENSHOT=1`` to also refresh
-``docs/screenshot.png`` (from the bundled demo when it is built, else from the fixture session).
+``docs/screenshot.png`` (the bundled demo) and ``docs/imported.png`` (the fixture session).
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ _reason = skip_reason()
 pytestmark = [pytest.mark.browser, pytest.mark.slow] + ([pytest.mark.skip(reason=_reason)] if _reason else [])
 
 DOCS_SCREENSHOT = Path(__file__).resolve().parents[1] / "docs" / "screenshot.png"
+DOCS_IMPORTED = DOCS_SCREENSHOT.with_name("imported.png")
 SCENE_BOX = (420, 120, 960, 900)  # part of a 1600x1000 page where the 3D canvas shows
 
 
@@ -186,32 +187,35 @@ def test_broken_rollout_shows_error_card_and_others_still_load(browser, app):
 
 
 def test_screenshot(browser, app, tmp_path):
-    """A screenshot of the app; refreshes docs/screenshot.png when INSPECTOR_DOCS_SCREENSHOT=1."""
+    """Screenshots of the app: the fixture session's imported rollout and, when it is built, the
+    bundled demo; with INSPECTOR_DOCS_SCREENSHOT=1 they refresh docs/imported.png and
+    docs/screenshot.png."""
     from inspector.session import is_session
     from inspector.sources import BUNDLED_DEMO
 
-    shot_app = app
+    shots = [(app, "ep000_train", DOCS_IMPORTED)]
     if os.environ.get("INSPECTOR_DOCS_SCREENSHOT") and is_session(BUNDLED_DEMO):
-        shot_app = serve([BUNDLED_DEMO], port=0, block=False)
+        demo = serve([BUNDLED_DEMO], port=0, block=False)
+        shots.append((demo, None, DOCS_SCREENSHOT))
     try:
-        page, tab = new_page(browser, shot_app)
-        hide_software_webgl_notice(page)
-        # The richest view: an autoregressive rollout with GT joints if there is one.
-        tag = _pick_rollout(shot_app)
-        open_in_page(page, tab, shot_app, tag)
-        tl = tab.loaded.timeline
-        tab.set_chunk(min(tl.worst_chunk()[0], tl.n_chunks - 1) if tl.kind == "autoregressive" else 0, 4)
-        wait_until(lambda: tab.loaded.frames.done.is_set(), timeout=60, what="PSNR")
-        page.wait_for_timeout(2500)
-        out = tmp_path / "screenshot.png"
-        page.screenshot(path=str(out))
-        assert canvas_is_drawn(out.read_bytes(), SCENE_BOX)
-        if os.environ.get("INSPECTOR_DOCS_SCREENSHOT"):
-            DOCS_SCREENSHOT.parent.mkdir(exist_ok=True)
-            DOCS_SCREENSHOT.write_bytes(out.read_bytes())
-        page.close()
+        for shot_app, tag, docs_path in shots:
+            page, tab = new_page(browser, shot_app)
+            hide_software_webgl_notice(page)
+            # The richest view: an autoregressive rollout with GT joints if there is one.
+            open_in_page(page, tab, shot_app, tag or _pick_rollout(shot_app))
+            tl = tab.loaded.timeline
+            tab.set_chunk(min(tl.worst_chunk()[0], tl.n_chunks - 1) if tl.kind == "autoregressive" else 0, 4)
+            wait_until(lambda: tab.loaded.frames.done.is_set(), timeout=60, what="PSNR")
+            page.wait_for_timeout(2500)
+            out = tmp_path / docs_path.name
+            page.screenshot(path=str(out))
+            assert canvas_is_drawn(out.read_bytes(), SCENE_BOX)
+            if os.environ.get("INSPECTOR_DOCS_SCREENSHOT"):
+                docs_path.parent.mkdir(exist_ok=True)
+                docs_path.write_bytes(out.read_bytes())
+            page.close()
     finally:
-        if shot_app is not app:
+        for shot_app, _, _ in shots[1:]:
             shot_app.stop()
 
 

@@ -603,6 +603,12 @@ def _free_port() -> int:
 def viewer_recording(tmp_path_factory) -> Path:
     """A rollout with GT joints and no video: in the viewer, the only large yellow and blue areas
     are the two arms (the GT arm is opaque yellow, the prediction translucent blue)."""
+    from inspector.session import is_session
+    from inspector.sources import BUNDLED_DEMO
+
+    if os.environ.get("INSPECTOR_DOCS_SCREENSHOT") and is_session(BUNDLED_DEMO):  # docs: the demo's
+        tl = build_timeline(open_session(BUNDLED_DEMO).rollouts["limits_wrist"])
+        return write_recording(tl, tmp_path_factory.mktemp("rrd") / "limits_wrist.rrd")
     gt = _gt_path(120)
     root = tmp_path_factory.mktemp("viewer") / "session"
     with SessionWriter.create(root, model={"name": "synthetic-wam"}) as w:
@@ -610,6 +616,9 @@ def viewer_recording(tmp_path_factory) -> Path:
                       prompt="Reach", gt_actions=gt, gt_episode_length=120)
     tl = build_timeline(open_session(root).rollouts["reach"])
     return write_recording(tl, tmp_path_factory.mktemp("rrd") / "reach.rrd")
+
+
+DOCS_VIEWER = Path(__file__).resolve().parents[1] / "docs" / "rerun_viewer.png"
 
 
 def _rerun_binary() -> Path:
@@ -743,6 +752,10 @@ def test_web_viewer_draws_both_arms(viewer_recording, tmp_path):
                     raise AssertionError(f"{exc}; last (yellow, blue, centre): {found}; see {shot}") from None
                 yellow, blue, (x, y) = found
                 assert x < 0.5 and y < 0.5, f"the arms are not in the layout's 3D view (top left): {found}, see {shot}"
+                if os.environ.get("INSPECTOR_DOCS_SCREENSHOT"):
+                    page.wait_for_timeout(5000)  # the video panels, decoded after the arms
+                    DOCS_VIEWER.parent.mkdir(exist_ok=True)
+                    DOCS_VIEWER.write_bytes(page.screenshot(timeout=180_000))
             finally:
                 browser.close()
     finally:
