@@ -73,12 +73,17 @@ def run_process(args: Sequence[str], env: dict[str, str] | None = None, timeout:
     """Run a command to its end: wall time and the peak summed RSS of its process tree."""
     import psutil
 
-    start = time.perf_counter()
-    proc = subprocess.Popen(list(args), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, **(env or {})})
-    peak = _sample_peak_rss(proc, lambda: proc.poll() is not None, timeout)
-    out, err = proc.communicate()
-    wall = time.perf_counter() - start
+    # Output goes to files: a pipe nobody reads while the command runs would block a command that
+    # writes more than the pipe holds (a report's JSON), and it would never end.
+    with tempfile.TemporaryFile("w+") as out_file, tempfile.TemporaryFile("w+") as err_file:
+        start = time.perf_counter()
+        proc = subprocess.Popen(list(args), stdout=out_file, stderr=err_file, text=True,
+                                env={**os.environ, **(env or {})})
+        peak = _sample_peak_rss(proc, lambda: proc.poll() is not None, timeout)
+        wall = time.perf_counter() - start
+        out_file.seek(0)
+        err_file.seek(0)
+        out, err = out_file.read(), err_file.read()
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(map(str, args))} exited {proc.returncode}: {err[-2000:]}")
     return Measured(wall, peak / 2**20, out)

@@ -169,10 +169,7 @@ def format_report(report: dict[str, Any]) -> str:
                   f"{'rollout':<{width}} {'RMSE deg':>9} {'worst joint (RMSE)':>20} {'step0 MSE':>10} "
                   f"{'last MSE':>9} {'lim.steps':>9}{psnr_head}  prompt"]
         for r in single:
-            worst = "-"
-            if r["per_joint_rmse"] is not None:
-                k = int(np.argmax(r["per_joint_rmse"]))
-                worst = f"{JOINT_NAMES[k]} {r['per_joint_rmse'][k]:.2f}"
+            worst = _worst_joint(r["per_joint_rmse"])
             mse = r["per_step_mse"]
             lines.append(f"{r['tag']:<{width}} {_f(r['rmse_deg'], '.3f'):>9} {worst:>20} "
                          f"{_f(mse[0] if mse else None):>10} {_f(mse[-1] if mse else None):>9} "
@@ -224,13 +221,18 @@ def _episode_table(episodes: list[dict[str, Any]]) -> list[str]:
              f"{'worst joint (RMSE)':>20} {'EE mm':>6} {'lim.steps meas/cmd':>18}  task"]
     for e in episodes:
         te = e["tracking_error"]
-        worst = "-"
-        if te["rmse"] is not None:
-            k = int(np.argmax(te["rmse"]))
-            worst = f"{JOINT_NAMES[k]} {te['rmse'][k]:.2f}"
+        worst = _worst_joint(te["rmse"])
         lim = e["limit_violations"]
         lines.append(f"{e['dataset']:<{width}} {e['episode_index']:>5} {e['length']:>6} {te['l2_mean']:>10.2f} "
                      f"{te['l2_max']:>7.2f} {worst:>20} {e['ee_tracking_error_mm']['mean']:>6.1f} "
                      f"{str(lim['measured']['steps']) + ' / ' + str(lim['commanded']['steps']):>18}  {e['task']}")
     lines.append("")
     return lines
+
+
+def _worst_joint(per_joint_rmse: list[float] | None) -> str:
+    """``"<joint> <rmse>"`` of the joint with the largest RMSE, or ``-``."""
+    if per_joint_rmse is None:
+        return "-"
+    k = int(np.argmax(per_joint_rmse))
+    return f"{JOINT_NAMES[k]} {per_joint_rmse[k]:.2f}"
