@@ -43,8 +43,10 @@ from ._overview_table import (
 if TYPE_CHECKING:
     from ._state import TabState
 
-# Rows arriving redraw a tab's overview at most this often [s].
+# Rows arriving redraw a tab's table at most this often, its figures less often (a thousand
+# rollouts' figures are most of a megabyte of SVG for the browser to lay out) [s].
 REDRAW_EVERY_S = 1.0
+FIGURES_EVERY_S = 5.0
 # The floating panel, over the scene (the right panel steps aside): it fills a 1600 x 1000 window
 # beside the left panel; the user may move and resize it [px].
 PANEL_X, PANEL_Y, PANEL_WIDTH, PANEL_HEIGHT = 8, 8, 1226, 965
@@ -69,8 +71,9 @@ class OverviewPanel:
         self.shown: list = []
         self._lock = threading.RLock()
         self._option_to_key: dict[str, str] = {}
+        self._picked_key: str | None = None  # the row the user chose in "Row to open"
         self._figures_for: tuple | None = None  # the rows the figures were drawn for
-        self._last_draw = 0.0
+        self._last_draw = self._last_figures = 0.0
         self._redraw_timer: threading.Timer | None = None
         client, gui, c = tab.client, tab.client.gui, tab.controls
         sessions = self.store.session_names()
@@ -145,10 +148,14 @@ class OverviewPanel:
                      kind=self.kind.value, session=self.session.value, flagged_only=self.flagged.value,
                      violations_only=self.violations.value, compare_with=self.compare.value)
 
-    def draw(self) -> None:
-        """Redraw the table, the compare summary and (when their rows changed) the figures."""
+    def draw(self, rows_arrived: bool = False) -> None:
+        """Redraw the table, the compare summary and (when their rows changed) the figures.
+
+        Args:
+            rows_arrived: the redraw is for rows computed meanwhile (the figures may wait).
+        """
         with self._lock:
-            if not self.visible or self.tab.closed.is_set():
+            if not self.visible or self._client_gone():
                 return
             self._last_draw = time.monotonic()
             rows = self.store.rows()
@@ -170,18 +177,27 @@ class OverviewPanel:
                 self.table.content = table_html(rows, shown, notes, comparison, self.tab.key)
                 self._set_row_options(shown)
                 drawn_for = tuple((r.key, r.summary is not None) for r in shown)
-                if drawn_for != self._figures_for:  # sorting alone keeps the figures
+                figures_due = (not rows_arrived or self.store.done.is_set()
+                               or time.monotonic() - self._last_figures >= FIGURES_EVERY_S)
+                if drawn_for != self._figures_for and figures_due:  # sorting alone keeps the figures
                     self._figures_for = drawn_for
+                    self._last_figures = time.monotonic()
                     self.figures.content = figures_html(shown)
 
+    def _client_gone(self) -> bool:
+        """The tab closed, or its connection did (viser lists a client until its connection
+        ends, then tells the app, which closes the tab: rows may arrive in between)."""
+        return self.tab.closed.is_set() or self.tab.client_id not in self.tab.app.server.get_clients()
+
     def _set_row_options(self, shown) -> None:
+        """``Row to open`` lists the table's rows, numbered as in the table."""
+        chosen = self._picked_key
         self._option_to_key = {f"{i + 1} · {r.key}": r.key for i, r in enumerate(shown[:MAX_TABLE_ROWS])}
         options = tuple(self._option_to_key) or (NO_ROWS,)
         if tuple(self.row.options) != options:
-            keep = self._option_to_key.get(self.row.value)
             self.row.options = options
-            # the same rollout stays chosen when the table's order changes, else the first row
-            self.row.value = next((o for o, k in self._option_to_key.items() if k == keep), options[0])
+            # the rollout the user chose stays chosen when the order changes; else the first row
+            self.row.value = next((o for o, k in self._option_to_key.items() if k == chosen), options[0])
 
     def _rows_arrived(self) -> None:
         """Rows arrived (on the computing thread): redraw now or a little later, not more often."""
@@ -193,7 +209,7 @@ class OverviewPanel:
                 return
             wait = self._last_draw + REDRAW_EVERY_S - time.monotonic()
             if wait <= 0 and not self.store.done.is_set():
-                self.draw()
+                self.draw(rows_arrived=True)
                 return
             self._redraw_timer = threading.Timer(max(wait, 0.0), self._timed_draw)
             self._redraw_timer.daemon = True
@@ -202,7 +218,7 @@ class OverviewPanel:
     def _timed_draw(self) -> None:
         with self._lock:
             self._redraw_timer = None
-            self.draw()
+            self.draw(rows_arrived=True)
 
     # ------------------------------------------------------------------------------------------
     # Wiring
@@ -218,6 +234,7 @@ class OverviewPanel:
         for control in (self.search, self.sort, self.descending, self.kind, self.session, self.flagged,
                         self.violations, self.compare):
             control.on_update(user(self.draw))
+        self.row.on_update(user(lambda: setattr(self, "_picked_key", self._option_to_key.get(self.row.value))))
         self.open_row.on_click(user(self.open_selected))
         self.close.on_click(user(self.hide))
         self.tab.controls.show_overview.on_click(user(self.show))
