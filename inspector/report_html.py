@@ -1,6 +1,7 @@
 """``inspector report --html OUT.html``: the whole evaluation in one file that opens offline.
 
-Everything is inline: the stylesheet and a small script (``report_assets/``), the figures as SVG
+Everything is inline: the stylesheets (``chart.css`` for the figures, shared with the app's
+overview, and ``report.css``) and a small script (``report_assets/``), the figures as SVG
 (:mod:`inspector.report_figures`), the table as HTML. Nothing is fetched from the network, and the
 page reads fully without its script (which only sorts, filters and highlights). Rollouts exported
 beside the page (``inspector export ... -o DIR`` writes ``DIR/<tag>.rrd``) are linked from their rows.
@@ -163,7 +164,8 @@ def _details(summary: str, items: list[str], cls: str, open_below: int = 10) -> 
     return f'<details{state}><summary>{escape(summary)}</summary><ul class="{cls}">{lis}</ul></details>'
 
 
-def _figure(fig: Figure) -> str:
+def figure_html(fig: Figure) -> str:
+    """A figure as HTML: heading, caption, its SVG panels and legend (styled by ``chart.css``)."""
     wide = " wide" if len(fig.panels) != 1 else ""
     out = [f'<figure id="{fig.key}" class="fig{wide}"><h3>{escape(fig.title)}</h3>'
            f'<p class="caption">{escape(fig.caption)}</p>']
@@ -208,7 +210,7 @@ def render_report_html(report: dict[str, Any], title: str = "Evaluation report",
     meta = (f"{len(rows)} rollout(s) from session(s) {escape(', '.join(sessions))}"
             + (f" ({escape(', '.join(map(str, sources)))})" if sources else "")
             + f" &middot; inspector {escape(_version())} &middot; {when}")
-    figures = "".join(_figure(f) for f in report_figures(rows))
+    figures = "".join(figure_html(f) for f in report_figures(rows))
     defs = "".join(f"<dt>{escape(k)}</dt><dd>{escape(v)}</dd>" for k, v in _DEFINITIONS)
     return (
         "<!DOCTYPE html>\n"
@@ -217,7 +219,7 @@ def render_report_html(report: dict[str, Any], title: str = "Evaluation report",
         # nothing may be fetched: inline styles and scripts only, no connections
         "<meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; "
         "style-src 'unsafe-inline'; script-src 'unsafe-inline'; img-src data:\">"
-        f"<title>{escape(title)}</title><style>{_asset('report.css')}</style></head><body>"
+        f"<title>{escape(title)}</title><style>{_asset('chart.css')}{_asset('report.css')}</style></head><body>"
         f"<h1>{escape(title)}</h1><p class=\"meta\">{meta}</p>"
         f"<h2>Summary</h2>{_summary(report)}"
         f'<h2>Figures</h2><div class="figures">{figures}</div>'

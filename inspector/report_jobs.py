@@ -177,14 +177,40 @@ def run_task(task: Task | EpisodeTask) -> list[Outcome]:
     """Rows of a task's rollouts (from the cache where it has them), or of its episodes."""
     if isinstance(task, EpisodeTask):
         return _run_episode_task(task)
-    from .cache import MetricsCache, rollout_key
-    from .ground_truth import resolve_ground_truth
+    from .cache import MetricsCache
 
     try:
         session = read_task_session(task.session_root, task.dataset)
     except InspectorError as exc:
         return [Outcome(task.session_root, tag, error_file=exc.file, error=exc.what) for tag in task.tags]
     cache = MetricsCache(task.cache_dir, enabled=task.use_cache)
+    outcomes, todo = _look_up(task, session, cache)
+    for batch in _batches(todo):
+        outcomes += _compute(batch, task, cache)
+    return outcomes
+
+
+def cached_outcomes(task: Task) -> tuple[list[Outcome], tuple[str, ...]]:
+    """The first half of :func:`run_task`, computing nothing: the rows the metrics cache holds
+    (and the rollouts that cannot be read), and the tags whose rows are still to compute.
+
+    What lists a whole evaluation at once (the app's overview) before computing the rest.
+    """
+    from .cache import MetricsCache
+
+    try:
+        session = read_task_session(task.session_root, task.dataset)
+    except InspectorError as exc:
+        return [Outcome(task.session_root, tag, error_file=exc.file, error=exc.what) for tag in task.tags], ()
+    outcomes, todo = _look_up(task, session, MetricsCache(task.cache_dir, enabled=task.use_cache))
+    return outcomes, tuple(p.rollout.tag for p in todo)
+
+
+def _look_up(task: Task, session: Any, cache) -> tuple[list[Outcome], list[_Pending]]:
+    """Outcomes of the task's rollouts found in ``cache`` or unreadable, and the others, read."""
+    from .cache import rollout_key
+    from .ground_truth import resolve_ground_truth
+
     outcomes: list[Outcome] = []
     todo: list[_Pending] = []
     for tag in task.tags:
@@ -199,9 +225,7 @@ def run_task(task: Task | EpisodeTask) -> list[Outcome]:
             todo.append(_Pending(rollout, gt, key, record))
         except InspectorError as exc:
             outcomes.append(Outcome(task.session_root, tag, error_file=exc.file, error=exc.what))
-    for batch in _batches(todo):
-        outcomes += _compute(batch, task, cache)
-    return outcomes
+    return outcomes, todo
 
 
 def _run_episode_task(task: EpisodeTask) -> list[Outcome]:

@@ -25,7 +25,7 @@ JOINT_HEX = ("#1c7ed6", "#2b8a3e", "#f08c00", "#ae3ec9", "#0ca678", "#e03131")
 
 
 class ControlPanel:
-    """Left panel: picker, rollout card, timeline controls, compare, notes, export."""
+    """Left panel: overview button, picker, rollout card, timeline controls, compare, notes, export."""
 
     def __init__(self, gui, keys: Sequence[str], error_keys: set[str], client_id: int = 0) -> None:
         # Picker labels mark rollouts that failed to load; they map back to catalog keys only.
@@ -35,6 +35,8 @@ class ControlPanel:
         # data-inspector-client lets a test find the server-side tab of a page.
         gui.add_html(f"<div data-inspector-client='{int(client_id)}' style='font-weight:600;"
                      "font-size:0.95rem;padding:0 0.2rem'>SO-101 rollout inspector</div>")
+        # the whole evaluation in one table (see ._overview, which wires it)
+        self.show_overview = gui.add_button("Overview", icon="table", hint="Every served rollout in one table")
         self.picker = gui.add_dropdown("Rollout", options, initial_value=options[0])
         self.error = gui.add_html("", visible=False)
         self.card = gui.add_html("")

@@ -16,6 +16,7 @@ from ..session import is_session
 from ..sources import BUNDLED_DEMO, Sources, open_sources
 from ._catalog import Catalog
 from ._frames import FrameCache
+from ._overview_rows import OverviewRows
 from ._robot import SharedRobot, joint_child_links
 from ._state import TabState
 
@@ -35,6 +36,7 @@ class InspectorApp:
 
     Attributes:
         catalog: the served rollouts and their shared data.
+        overview_rows: the overview's summary row of every served rollout.
         tabs: ``{client_id: TabState}`` of the connected tabs.
     """
 
@@ -53,6 +55,8 @@ class InspectorApp:
         self.frame_cache = FrameCache(int(cache_mb * 2**20))
         self.catalog = Catalog(sources, self._decoder, joint_child_links(), self.frame_cache,
                                metrics_cache if metrics_cache is not None else MetricsCache())
+        # summary rows of every rollout for the overview, computed once when a tab first shows it
+        self.overview_rows = OverviewRows(self.catalog)
         self.server = viser.ViserServer(host=host, port=port, label="inspector", verbose=False)
         self.server.initial_camera.position = (0.40, -0.32, 0.28)
         self.server.initial_camera.look_at = (0.10, 0.0, 0.10)
@@ -111,6 +115,7 @@ class InspectorApp:
         """Close every tab, stop the server and drop temporary sessions."""
         for tab in list(self.tabs.values()):
             tab.close()
+        self.overview_rows.stop()
         self.server.stop()
         self._decoder.shutdown(wait=False, cancel_futures=True)
         self.sources.close()

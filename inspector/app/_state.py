@@ -35,6 +35,7 @@ from ._annotations import rollout_annotations, update_annotation
 from ._cards import error_card, esc, headline_metrics, rollout_card, unit, video_grid
 from ._catalog import Loaded
 from ._frames import FramePair
+from ._overview import OverviewPanel
 from ._panels import NO_COMPARE, ControlPanel, PlotPanel, VideoPanel
 from ._scene import TabScene
 
@@ -106,6 +107,7 @@ class TabState:
             robot, self.robot_note = None, f"robot model failed to load ({type(exc).__name__}: {exc})"
         self.scene = TabScene(client, robot)
         self._wire()  # only now: a control moved earlier would find no scene
+        self.overview = OverviewPanel(self)
 
     # ------------------------------------------------------------------------------------------
     # Opening rollouts

@@ -1,0 +1,320 @@
+"""The app's Overview: every served rollout in one table, the report's figures, compare with a session.
+
+Rows are computed once per app from the report machinery and its metrics cache; the table is
+drawn by plain functions (checked here without a browser) and shown in a real browser (Debian
+Chromium driven by Playwright). The browser tests serve the bundled demo beside a copy of it
+("checkpoint_b") whose ``prompt_train`` and ``single_f000`` predictions are planted 3 deg off
+(B must lose those two and tie the rest), and the shared DreamZero fixtures with a broken rollout.
+Set ``INSPECTOR_DOCS_SCREENSHOT=1`` to also refresh ``docs/overview.png`` (the demo alone).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from browser import hide_software_webgl_notice, launch, open_app, open_page, select_option, skip_reason, wait_until
+
+from inspector.app import serve
+from inspector.app._overview_rows import OverviewRow, OverviewRows
+from inspector.app._overview_table import (
+    DELTA_RMSE,
+    Note,
+    Query,
+    compare_with_session,
+    figures_html,
+    scoped_css,
+    select_rows,
+    table_html,
+)
+from inspector.cache import MetricsCache
+from inspector.sources import BUNDLED_DEMO
+
+DOCS_SCREENSHOT = Path(__file__).resolve().parents[1] / "docs" / "overview.png"
+OFFSET_DEG = 3.0
+OFFSET_TAGS = ("prompt_train", "single_f000")
+ROWS_TIMEOUT_S = 600.0  # computing every demo row (videos included) on a busy 2-core machine
+
+
+def _demo_copy(dest: Path, name: str, offset_tags=(), broken_tag: str | None = None) -> Path:
+    """A copy of the bundled demo named ``name``: ``offset_tags`` predict OFFSET_DEG more on
+    shoulder_pan; ``broken_tag`` has a truncated actions.npy."""
+    shutil.copytree(BUNDLED_DEMO, dest)
+    meta = json.loads((dest / "session.json").read_text())
+    (dest / "session.json").write_text(json.dumps({**meta, "name": name}))
+    for tag in offset_tags:
+        path = dest / "rollouts" / tag / "actions.npy"
+        actions = np.load(path)
+        actions[..., 0] += OFFSET_DEG
+        np.save(path, actions)
+    if broken_tag is not None:
+        path = dest / "rollouts" / broken_tag / "actions.npy"
+        path.write_bytes(path.read_bytes()[:200])
+    return dest
+
+
+def _catalog(paths, cache: MetricsCache):
+    from inspector.app._catalog import Catalog
+    from inspector.sources import open_sources
+
+    return Catalog(open_sources(paths, confine=True, datasets=True), None, {}, metrics_cache=cache)
+
+
+# ----------------------------------------------------------------------------------------------
+# Rows, without a browser
+
+
+def test_rows_are_computed_once_then_listed_from_the_cache(tmp_path, monkeypatch):
+    session = _demo_copy(tmp_path / "demo", "demo", broken_tag="bias_elbow")
+    cache = MetricsCache(tmp_path / "cache")
+    catalog = _catalog([session], cache)
+    first = OverviewRows(catalog)
+    assert len(first) == 12 and all(r.pending or r.error for r in first.rows())  # listed before computing
+    first.start()
+    assert first.done.wait(ROWS_TIMEOUT_S)
+    rows = {r.tag: r for r in first.rows()}
+    assert "actions.npy" in rows["bias_elbow"].error  # one bad rollout: its error row, the rest computed
+    assert first.n_computed == 11 and first.n_cached == 0
+    assert rows["tempo_0.8x"].summary["tempo"] == pytest.approx(0.8, abs=0.05)
+
+    # A second app on the same cache lists every row without computing any.
+    import inspector.report_jobs as report_jobs
+
+    def no_computing(*args, **kwargs):
+        raise AssertionError("a cached row was computed again")
+
+    monkeypatch.setattr(report_jobs, "_compute", no_computing)
+    second = OverviewRows(_catalog([session], cache))
+    second.start()
+    assert second.done.wait(120)
+    assert second.n_cached == 11 and second.n_computed == 0
+    again = {r.tag: r for r in second.rows()}
+    assert all(again[t].cached for t in rows if t != "bias_elbow")
+    assert again["limits_wrist"].summary == rows["limits_wrist"].summary
+
+
+def _row(key: str, rmse: float | None, kind: str = "single_chunk", prompt: str = "pick", session: str = "a",
+         limit_steps: int = 0, error: str | None = None, tag: str | None = None) -> OverviewRow:
+    tag = tag or key.rsplit("/", 1)[-1].strip()
+    summary = None if error else {
+        "tag": tag, "session": session, "kind": kind, "prompt": prompt, "episode_index": 0, "start_frame": 0,
+        "rmse_deg": rmse, "per_step_mse": None, "chunk_joints": None, "n_chunks": 1, "steps_per_chunk": 24,
+        "episode_length": None, "time_aligned_drift": {"mean": rmse, "final": rmse, "per_chunk": [rmse]},
+        "best_match_drift": None, "tempo": None, "ee_error_mm": None, "post_episode_chunks": 0,
+        "limit_violations": {"steps": limit_steps}, "video_psnr_db": {"front": 18.0}}
+    return OverviewRow(key, session, tag, kind, prompt, Path("/nowhere") / session, summary, error)
+
+
+def test_sorting_and_filters_select_rows():
+    rows = [_row("a / r1", 2.0), _row("a / r2", None, kind="autoregressive"), _row("a / r3", 1.0, prompt="Pick BLUE"),
+            _row("a / r4", 3.0, limit_steps=5), _row("a / bad", None, error="actions.npy: truncated")]
+    notes = {"a / r3": Note(flag=True, note="look")}
+
+    def keys(**q) -> list[str]:
+        return [r.key for r in select_rows(rows, Query(**q), notes)]
+
+    assert keys() == ["a / r1", "a / r2", "a / r3", "a / r4", "a / bad"]
+    assert keys(sort="RMSE") == ["a / r3", "a / r1", "a / r4", "a / r2", "a / bad"]  # no value: last
+    assert keys(sort="RMSE", descending=True) == ["a / r4", "a / r1", "a / r3", "a / r2", "a / bad"]
+    assert keys(kind="autoregressive") == ["a / r2"]
+    assert keys(kind="errors") == ["a / bad"]
+    assert keys(search="blue pick") == ["a / r3"]
+    assert keys(flagged_only=True) == ["a / r3"]
+    assert keys(violations_only=True) == ["a / r4"]
+    html = table_html(rows, select_rows(rows, Query(), notes), notes)
+    assert html.count("<tr data-key=") == 5 and "actions.npy: truncated" in html and "look" in html
+
+
+def test_compare_with_a_session_pairs_rows_and_counts_winners():
+    a = [_row(f"a / r{i}", 1.0 + i, session="a", tag=f"r{i}") for i in range(4)]
+    b = [_row(f"b / r{i}", 1.0 + i + (0.5 if i < 3 else 0.0), session="b", tag=f"r{i}") for i in range(4)]
+    comparison = compare_with_session(a + b, Query(compare_with="b"), {})
+    summary = comparison.result["summary"]
+    assert (summary["n_pairs"], summary["a_better"], summary["b_better"], summary["ties"]) == (4, 3, 0, 1)
+    assert comparison.pair_of["a / r0"][:2] == ("b / r0", pytest.approx(0.5))
+    shown = select_rows(a + b, Query(compare_with="b", sort=DELTA_RMSE, descending=True), {}, comparison)
+    assert [r.key for r in shown][-1] == "a / r3"  # B's rows are the other side, not table rows
+    assert len(shown) == 4
+
+
+def test_figures_and_styles_are_the_reports():
+    html = figures_html([_row("a / r1", 2.0)])
+    assert "rmse-by-position" in html and "<svg" in html
+    css = scoped_css(".ln.c0, .pt { stroke: red; }\nsvg text { fill: #000 }")
+    assert css.splitlines() == [".inspector-overview .ln.c0, .inspector-overview .pt {stroke: red;}",
+                                ".inspector-overview svg text {fill: #000}"]
+
+
+# ----------------------------------------------------------------------------------------------
+# In a real browser
+
+_reason = skip_reason()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if _reason:
+        pytest.skip(_reason)
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = launch(p)
+        yield b
+        b.close()
+
+
+@pytest.fixture(scope="module")
+def demo_pair_app(tmp_path_factory):
+    """The demo and its planted copy, served together, every row computed."""
+    copy = _demo_copy(tmp_path_factory.mktemp("overview") / "checkpoint_b", "checkpoint_b", OFFSET_TAGS)
+    app = serve([BUNDLED_DEMO, copy], port=0, block=False)
+    app.overview_rows.start()
+    yield app
+    app.stop()
+
+
+def _open(browser, app, width: int = 1600, height: int = 1000):
+    """A page on the app once the overview shows every row with its metrics, and its tab."""
+    page = open_page(browser, width, height)
+    open_app(page, app.url)
+    assert app.overview_rows.done.wait(ROWS_TIMEOUT_S), "overview rows still computing"
+    page.wait_for_selector("table.ov-table")
+    wait_until(lambda: page.locator("table.ov-table tr.pending").count() == 0, what="every row drawn computed")
+    client_id = int(page.locator("[data-inspector-client]").first.get_attribute("data-inspector-client"))
+    tab = wait_until(lambda: app.tabs.get(client_id), what="the page's tab")
+    return page, tab
+
+
+def _table_keys(page) -> list[str]:
+    return page.eval_on_selector_all("table.ov-table tbody tr", "rows => rows.map(r => r.dataset.key)")
+
+
+def _cells(page, col: str) -> list[str]:
+    return page.eval_on_selector_all(f"table.ov-table tbody td[data-col='{col}']", "cs => cs.map(c => c.textContent)")
+
+
+def _text_field(page, label: str):
+    """The input of the viser text field labelled ``label`` (its <label> names no element id)."""
+    return page.locator(f"xpath=//label[normalize-space()='{label}']/ancestor::*[.//input][1]//input").first
+
+
+def _wait_keys(page, condition, what: str) -> list[str]:
+    return wait_until(lambda: condition(_table_keys(page)) and _table_keys(page), what=what)
+
+
+def _numbers(cells: list[str]) -> list[float]:
+    return [float(v) for v in cells if v not in ("", "–")]
+
+
+# Each page action takes seconds on a busy machine (the 3D scene renders in software behind the
+# overview): the browser tests do few, and check the rest on the server or in the unit tests above.
+@pytest.mark.browser
+@pytest.mark.slow
+def test_overview_lists_sorts_filters_draws_and_opens(browser, demo_pair_app):
+    app = demo_pair_app
+    page, tab = _open(browser, app)
+    # shown by default (more than one rollout served): every rollout of both sessions
+    assert page.locator(".inspector-overview table").first.is_visible()
+    assert sorted(_table_keys(page)) == sorted(k for k, e in app.catalog.entries.items() if e.session)
+    assert len(_table_keys(page)) == 24
+
+    select_option(page, "Sort by", "RMSE")
+    wait_until(lambda: _numbers(_cells(page, "rmse")) == sorted(_numbers(_cells(page, "rmse")))
+               and len(_numbers(_cells(page, "rmse"))) == 24, what="rows ordered by RMSE")
+    assert _table_keys(page)[-1].endswith("/ tempo_0.8x")  # the demo's largest RMSE: its slow rollout
+
+    search = _text_field(page, "Search prompts")
+    search.fill("blue cube")
+    _wait_keys(page, lambda ks: sorted(ks) == ["checkpoint_b / prompt_novel", "demo / prompt_novel"],
+               "the prompt search")
+    search.fill("")
+    select_option(page, "Kind", "single-chunk")
+    keys = _wait_keys(page, lambda ks: len(ks) == 12, "the kind filter")
+    assert all("/ single_f" in k for k in keys)
+
+    # the report's figures, drawn (from the rows the filters keep: the single-chunk samples)
+    for figure in ("per-step-rmse", "rmse-by-position", "joint-overlay"):
+        drawn = page.locator(f".inspector-overview figure#{figure} svg.chart path.ln, "
+                             f".inspector-overview figure#{figure} svg.chart circle.pt")
+        assert drawn.count() > 0, f"figure {figure} has nothing drawn"
+    assert page.locator(".inspector-overview circle.pt").count() >= 12  # one dot per sample
+
+    # a row opens in the tab's normal view
+    option = next(o for o in tab.overview.row.options if o.endswith("demo / single_f153"))
+    select_option(page, "Row to open", option)
+    page.get_by_role("button", name="Open rollout").click()
+    wait_until(lambda: tab.key == "demo / single_f153" and tab.loaded is not None, what="the row to open")
+    page.locator(".inspector-overview table").first.wait_for(state="hidden")
+    page.locator("img.inspector-frame").first.wait_for(state="visible")
+    # the Overview button brings the table back, the open rollout marked
+    page.get_by_role("button", name="Overview").click()
+    page.locator("tr.open[data-key='demo / single_f153']").wait_for(state="visible")
+    page.close()
+
+
+@pytest.mark.browser
+@pytest.mark.slow
+def test_compare_with_a_session_shows_the_planted_winners_and_drift_figures(browser, demo_pair_app):
+    page, tab = _open(browser, demo_pair_app)
+    drift = page.locator(".inspector-overview figure#drift svg.chart").first.locator("path.ln:not(.post)")
+    assert drift.count() >= 12  # every autoregressive rollout of both sessions
+    select_option(page, "Compare with session", "checkpoint_b")
+    info = page.locator(".inspector-overview .ov-compare").first
+    info.wait_for(state="visible")
+    text = info.inner_text()
+    assert "12 pair(s) (12 by tag" in text
+    # B predicts 3 deg off on two rollouts: A wins those, the other ten tie
+    assert "A better in 2, B better in 0, ties 10" in text
+    keys = _wait_keys(page, lambda ks: len(ks) == 12, "B's rows set aside")
+    assert all(k.startswith("demo / ") for k in keys)
+    for tag in OFFSET_TAGS:
+        delta = page.locator(f"tr[data-key='demo / {tag}'] td[data-col='delta']").inner_text()
+        assert float(delta) > 0, f"{tag}: B should be worse"
+    assert float(page.locator("tr[data-key='demo / bias_elbow'] td[data-col='delta']").inner_text()) == 0
+    page.close()
+
+
+@pytest.mark.browser
+@pytest.mark.slow
+def test_fixture_rollouts_are_listed_with_the_broken_one_as_an_error_row(browser, fixtures_dir, tmp_path_factory):
+    from test_app import make_sessions
+
+    _, broken = make_sessions(fixtures_dir, tmp_path_factory.mktemp("overview-fixtures"))
+    app = serve([broken], port=0, block=False)
+    try:
+        page, tab = _open(browser, app)
+        keys = _table_keys(page)
+        assert sorted(keys) == sorted(app.catalog.keys())
+        error_row = page.locator("tr.error", has_text="f000")
+        assert error_row.count() == 1 and "actions.npy" in error_row.inner_text()
+        per_step = page.locator(".inspector-overview figure#per-step-rmse svg.chart path.ln")
+        assert per_step.count() >= 2  # the zero-shot samples and their mean
+        select_option(page, "Sort by", "RMSE")
+        wait_until(lambda: _numbers(_cells(page, "rmse")) == sorted(_numbers(_cells(page, "rmse"))),
+                   what="rows ordered by RMSE")
+        page.close()
+    finally:
+        app.stop()
+
+
+@pytest.mark.browser
+@pytest.mark.slow
+def test_overview_screenshot(browser, tmp_path):
+    """The demo's overview; refreshes docs/overview.png when INSPECTOR_DOCS_SCREENSHOT=1."""
+    app = serve([BUNDLED_DEMO], port=0, block=False)
+    try:
+        page, tab = _open(browser, app)
+        hide_software_webgl_notice(page)
+        page.locator(".inspector-overview figure#drift svg.chart").first.wait_for(state="visible")
+        page.wait_for_timeout(1000)  # let the layout settle
+        out = tmp_path / "overview.png"
+        page.screenshot(path=str(out))
+        if os.environ.get("INSPECTOR_DOCS_SCREENSHOT"):
+            DOCS_SCREENSHOT.write_bytes(out.read_bytes())
+        page.close()
+    finally:
+        app.stop()
