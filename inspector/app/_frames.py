@@ -28,6 +28,7 @@ import numpy.typing as npt
 from ..cache import DEFAULT_FRAME_CACHE_MB
 from ..timeline import RolloutTimeline
 from ..video import fit_size
+from ._listeners import Listeners
 
 LOADING = "loading"
 READY = "ready"
@@ -147,7 +148,7 @@ class FrameStore:
         self._cache = cache
         self._on_video_metrics = on_video_metrics
         self._lock = threading.Lock()
-        self._listeners: list[Callable[[], None]] = []
+        self._listeners = Listeners()
         self._filling: set[str] = set()
         self._framed: set[str] = set()  # views whose frames are all in the cache
         self._finished: set[str] = set()  # ... and whose PSNR is known (or failed, or has none)
@@ -291,21 +292,13 @@ class FrameStore:
             self._cache.put(full_key, jpeg_data_uri(rgb, size))
 
     def add_listener(self, fn: Callable[[], None]) -> None:
-        with self._lock:
-            self._listeners.append(fn)
+        self._listeners.add(fn)
 
     def remove_listener(self, fn: Callable[[], None]) -> None:
-        with self._lock:
-            self._listeners = [f for f in self._listeners if f is not fn]
+        self._listeners.remove(fn)
 
     def _notify(self) -> None:
-        with self._lock:
-            listeners = list(self._listeners)
-        for fn in listeners:
-            try:
-                fn()
-            except Exception:
-                pass  # a tab that went away must not break the decoder
+        self._listeners.notify()
 
     # -- lookups on the scrub path (never decode) ---------------------------------------------
     def pair(self, view: str, step: int) -> FramePair:

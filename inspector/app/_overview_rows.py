@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from ..units import DEFAULT_LIMIT_MARGIN_DEG
+from ._listeners import Listeners
 
 # Rollouts per computing task: tasks of rollouts sharing a GT episode decode its clip once, and
 # smaller tasks show their rows sooner; a few is the balance.
@@ -96,7 +97,7 @@ class OverviewRows:
             self._key_of[(root, entry.tag)] = entry.key
             if rollout is not None:
                 self._sessions[root] = entry.session
-        self._listeners: list[Callable[[], None]] = []
+        self._listeners = Listeners()
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self.done = threading.Event()
@@ -121,22 +122,13 @@ class OverviewRows:
     # -- listening ------------------------------------------------------------------------------
     def add_listener(self, fn: Callable[[], None]) -> None:
         """Call ``fn()`` (on the computing thread) whenever rows arrive, and once when all are done."""
-        with self._lock:
-            self._listeners.append(fn)
+        self._listeners.add(fn)
 
     def remove_listener(self, fn: Callable[[], None]) -> None:
-        with self._lock:
-            if fn in self._listeners:
-                self._listeners.remove(fn)
+        self._listeners.remove(fn)
 
     def _notify(self) -> None:
-        with self._lock:
-            listeners = list(self._listeners)
-        for fn in listeners:
-            try:
-                fn()
-            except Exception:  # a tab that went away must not stop the rows of the others
-                pass
+        self._listeners.notify()
 
     # -- computing ------------------------------------------------------------------------------
     def start(self) -> None:

@@ -1,0 +1,33 @@
+"""Callbacks that tabs register on shared data (a rollout's frames, the Overview's rows)."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+
+
+class Listeners:
+    """A thread-safe set of ``fn()`` callbacks, called in the order they were added."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._fns: list[Callable[[], None]] = []
+
+    def add(self, fn: Callable[[], None]) -> None:
+        with self._lock:
+            self._fns.append(fn)
+
+    def remove(self, fn: Callable[[], None]) -> None:
+        with self._lock:
+            self._fns = [f for f in self._fns if f != fn]  # bound methods compare equal, not identical
+
+    def notify(self) -> None:
+        """Call every callback outside the lock; one that fails (its tab went away) never stops
+        the others or the thread that notifies."""
+        with self._lock:
+            fns = list(self._fns)
+        for fn in fns:
+            try:
+                fn()
+            except Exception:
+                pass
