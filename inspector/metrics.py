@@ -194,7 +194,7 @@ def dtw(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, Array | float]:
     lead = p.shape[:-2]
     p = p.reshape(-1, *p.shape[-2:])
     B, T, _ = p.shape
-    workers = min(B, os.cpu_count() or 1)
+    workers = min(B, DTW_THREADS or os.cpu_count() or 1)
     by_memory = max(1, DTW_BLOCK_BYTES // max(1, 5 * T * len(g)))
     block = max(1, min(by_memory, -(-B // workers)))
     blocks = [p[i:i + block] for i in range(0, B, block)]
@@ -204,6 +204,10 @@ def dtw(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, Array | float]:
     cost = np.concatenate([r[1] for r in results]).reshape(lead)
     return (drift[0], float(cost[0])) if squeeze else (drift, cost)
 
+
+# Threads for DTW blocks (None: one per core); a worker process of a pool that already keeps
+# every core busy sets 1.
+DTW_THREADS: int | None = None
 
 # Memory for one block of DTW tables [bytes]: 5 bytes per cell (float32 costs and a direction
 # byte), so a 540-step rollout against a 600-frame episode takes 1.6 MB.

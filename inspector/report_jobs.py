@@ -156,9 +156,10 @@ def _init_worker() -> None:
     """One thread per worker process: the pool already keeps every core busy."""
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[var] = "1"  # before numpy loads in this process
-    from . import video
+    from . import metrics, video
 
     video.DECODE_THREADS = None
+    metrics.DTW_THREADS = 1
 
 
 def default_jobs() -> int:
