@@ -385,6 +385,55 @@ def bench_scrub(tmp: Path, quick: bool) -> Figure:
                   note="server side, in process")
 
 
+def bench_playback(tmp: Path, quick: bool) -> list[Figure]:
+    """Video frame updates per second the page shows while playing at 1x, in headless Debian
+    Chromium (WebGL in software), counted in the page at every animation frame; beside the same
+    with the 3D canvas hidden (what the software-rendered scene costs)."""
+    sys.path.insert(0, str(REPO / "tests"))
+    from browser import launch, open_app, page_client_id, select_option, skip_reason, wait_until
+
+    if (reason := skip_reason()) is not None:
+        print(f"  playback: skipped ({reason})", file=sys.stderr)
+        return []
+    from playwright.sync_api import sync_playwright
+
+    from inspector.app import serve
+
+    count_frames = """() => { window.__seen = 0; let last = null; const tick = () => {
+        const e = document.querySelector("img.inspector-frame[data-kind='imagined']");
+        const s = e && e.getAttribute('data-frame');
+        if (s !== last) { window.__seen++; last = s; } requestAnimationFrame(tick); }; tick(); }"""
+    rates = {}
+    app = serve([DEMO], port=0, block=False)
+    try:
+        with sync_playwright() as pw:
+            browser = launch(pw)
+            for hidden in (False, True):
+                page = browser.new_page(viewport={"width": 1600, "height": 1000})
+                open_app(page, app.url)
+                tab = wait_until(lambda: app.tabs.get(page_client_id(page)), what="the tab")
+                key = next(k for k, e in app.catalog.entries.items() if e.tag == "prompt_train")
+                select_option(page, "Rollout", key)
+                wait_until(lambda: tab.key == key and tab.loaded is not None and tab.loaded.frames.done.is_set(),
+                           timeout=120, what="the rollout's frames")
+                if hidden:
+                    page.add_style_tag(content="canvas:not(.uplot canvas){visibility:hidden}")
+                page.wait_for_timeout(2000)
+                page.evaluate(count_frames)
+                start = time.monotonic()
+                tab.play()
+                page.wait_for_timeout(4000 if quick else 8000)
+                tab.pause()
+                rates[hidden] = page.evaluate("() => window.__seen") / (time.monotonic() - start)
+                page.close()
+            browser.close()
+    finally:
+        app.stop()
+    return [Figure("playback", rates[False], "updates/s", ">= 20 /s at 1x", rates[False] >= 20,
+                   baseline=rates[True], note="headless Chromium, 1600x1000, demo prompt_train; "
+                   "baseline: the 3D canvas hidden")]
+
+
 @contextlib.contextmanager
 def _serve(args: Sequence[str], env: dict[str, str]) -> Iterator[tuple[subprocess.Popen, int]]:
     port = _free_port()
@@ -483,7 +532,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="smaller counts, fewer repetitions")
     parser.add_argument("--json", type=Path, help="also write the figures as JSON")
-    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve")
+    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback")
     args = parser.parse_args(argv)
 
     figures: list[Figure] = []
@@ -498,6 +547,7 @@ def main(argv: list[str] | None = None) -> int:
             ("open", lambda: bench_open(tmp, args.quick)),
             ("scrub", lambda: bench_scrub(tmp, args.quick)),
             ("serve", lambda: bench_serve(tmp, args.quick)),
+            ("playback", lambda: bench_playback(tmp, args.quick)),
         ]
         for name, run in runs:
             if args.only and name not in args.only:
