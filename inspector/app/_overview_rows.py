@@ -6,8 +6,9 @@ decoding any video, so a cached evaluation of 1,000 rollouts lists in seconds; a
 computes the rest, a few rollouts per task, and each task's rows appear as it finishes. Only
 summary rows are kept (a few kB each), never timelines or frames.
 
-The work runs on one daemon thread at a lower CPU priority: scrubbing a rollout in a tab stays
-smooth while rows are computed, and stopping the app never waits for it. A rollout that fails
+The cache pass runs on one daemon thread; rows are computed in one spawned worker process at a
+lower CPU priority (never under the server's GIL), so tabs load and scrub smoothly while rows are
+computed, and stopping the app never waits for it. A rollout that fails
 becomes an error row; it never stops the others.
 
 Dataset episodes (served LeRobot datasets) are not listed: their rows measure something else
@@ -158,11 +159,16 @@ class OverviewRows:
                 self._notify()
                 for i in range(0, len(missing), COMPUTE_TASK_ROLLOUTS):
                     to_compute.append(replace(task, tags=missing[i:i + COMPUTE_TASK_ROLLOUTS]))
-            for task in to_compute:
-                if self._stop.is_set():
-                    return
-                self._publish(_guarded(task, run_task))
-                self._notify()
+            if to_compute:
+                # In a worker process: computing in this one would hold the GIL against the
+                # threads that serve the tabs (pages took minutes to load on two busy cores).
+                with _background_pool() as pool:
+                    for task in to_compute:
+                        if self._stop.is_set():
+                            pool.shutdown(wait=False, cancel_futures=True)
+                            return
+                        self._publish(_guarded(task, lambda t: pool.submit(run_task, t).result()))
+                        self._notify()
         finally:
             self.done.set()
             self._notify()
@@ -195,6 +201,25 @@ def _guarded(task, fn, with_missing: bool = False):
         failed = [Outcome(task.session_root, tag, error_file=str(Path(task.session_root) / "rollouts" / tag),
                           error=f"cannot compute its row ({type(exc).__name__}: {exc})") for tag in task.tags]
         return (failed, ()) if with_missing else failed
+
+
+def _background_pool():
+    """One spawned worker process at a lower CPU priority, set up as a report worker."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    return ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_init_background_worker)
+
+
+def _init_background_worker() -> None:
+    from ..report_jobs import _init_worker
+
+    try:
+        os.nice(BACKGROUND_NICENESS)
+    except (AttributeError, OSError):
+        pass
+    _init_worker()
 
 
 def _lower_priority() -> None:
