@@ -28,7 +28,7 @@ import numpy.typing as npt
 from ..cache import DEFAULT_FRAME_CACHE_MB
 from ..timeline import RolloutTimeline
 from ..video import fit_size
-from ._listeners import Listeners
+from ._listeners import Listeners, Notifying
 
 LOADING = "loading"
 READY = "ready"
@@ -118,7 +118,7 @@ class FramePair:
     gt_index: int | None = None
 
 
-class FrameStore:
+class FrameStore(Notifying):
     """Frames of one rollout's views, shared by every tab that shows the rollout.
 
     A view has an imagined clip, a GT clip, or both; a dataset episode's cameras (and a dataset
@@ -290,15 +290,6 @@ class FrameStore:
         full_key = (*key, size)
         if full_key not in self._cache:
             self._cache.put(full_key, jpeg_data_uri(rgb, size))
-
-    def add_listener(self, fn: Callable[[], None]) -> None:
-        self._listeners.add(fn)
-
-    def remove_listener(self, fn: Callable[[], None]) -> None:
-        self._listeners.remove(fn)
-
-    def _notify(self) -> None:
-        self._listeners.notify()
 
     # -- lookups on the scrub path (never decode) ---------------------------------------------
     def pair(self, view: str, step: int) -> FramePair:

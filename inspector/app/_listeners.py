@@ -31,3 +31,20 @@ class Listeners:
                 fn()
             except Exception:
                 pass
+
+
+class Notifying:
+    """For shared data that tabs listen to: ``add_listener`` / ``remove_listener``, and
+    ``_notify`` when something changed. Subclasses set ``self._listeners = Listeners()``."""
+
+    _listeners: Listeners
+
+    def add_listener(self, fn: Callable[[], None]) -> None:
+        """Call ``fn()`` (on the thread that makes the change) whenever it changes."""
+        self._listeners.add(fn)
+
+    def remove_listener(self, fn: Callable[[], None]) -> None:
+        self._listeners.remove(fn)
+
+    def _notify(self) -> None:
+        self._listeners.notify()

@@ -19,13 +19,12 @@ from __future__ import annotations
 
 import os
 import threading
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from ..units import DEFAULT_LIMIT_MARGIN_DEG
-from ._listeners import Listeners
+from ._listeners import Listeners, Notifying
 
 # Rollouts per computing task: tasks of rollouts sharing a GT episode decode its clip once, and
 # smaller tasks show their rows sooner; a few is the balance.
@@ -64,8 +63,9 @@ class OverviewRow:
         return self.summary is None and self.error is None
 
 
-class OverviewRows:
+class OverviewRows(Notifying):
     """Summary rows of every rollout a catalog serves, computed in the background on demand.
+    Listeners are called on the computing thread whenever rows arrive, and once when all are done.
 
     Args:
         catalog: the app's :class:`~._catalog.Catalog` (its sessions and metrics cache).
@@ -119,17 +119,6 @@ class OverviewRows:
     def session_names(self) -> list[str]:
         """The sessions' picker names, in the picker's order."""
         return list(dict.fromkeys(r.session for r in self._rows.values()))
-
-    # -- listening ------------------------------------------------------------------------------
-    def add_listener(self, fn: Callable[[], None]) -> None:
-        """Call ``fn()`` (on the computing thread) whenever rows arrive, and once when all are done."""
-        self._listeners.add(fn)
-
-    def remove_listener(self, fn: Callable[[], None]) -> None:
-        self._listeners.remove(fn)
-
-    def _notify(self) -> None:
-        self._listeners.notify()
 
     # -- computing ------------------------------------------------------------------------------
     def start(self) -> None:
