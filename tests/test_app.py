@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import base64
+import io
 import json
 import os
 import shutil
@@ -13,12 +15,16 @@ import time
 import urllib.request
 from pathlib import Path
 
+import av
 import numpy as np
 import pytest
+import simplejpeg
+from browser import wait_until
 
 from inspector.app import HeadlessClient, TabState, serve
 from inspector.app._annotations import read_annotations, update_annotation
 from inspector.app._frames import READY
+from inspector.app._playback_clip import CLIP_STEPS
 from inspector.errors import InspectorError
 
 
@@ -382,3 +388,43 @@ def test_cli_serve_subprocess(sessions):
             proc.wait(timeout=10)
         except subprocess.TimeoutExpired:
             proc.kill()
+
+
+def test_playback_swaps_in_clips_of_the_shown_frames_and_back(app):
+    """Play: every video panel gets an H.264 clip of exactly the frames it would step through, at
+    the playback rate; a second Play finds them cached; Pause brings the step's images back."""
+    client, tab = connect(app)
+    with client:
+        tab.open(key(app, "ep000_train"))
+        wait_until(tab.loaded.frames.done.is_set, what="the frames")
+        tl = tab.loaded.timeline
+        tab.speed = 0.25  # a slow clock: the clip is ready long before playback ends
+        tab.play()
+        wait_until(lambda: tab._clip is not None, timeout=120, what="the playback clips")
+        clip, html = tab._clip, tab.video.html.content
+        panels = {(p.view, "imagined") for p in tab.pairs if p.imagined} | {(p.view, "gt") for p in tab.pairs if p.gt}
+        assert set(clip.uris) == panels and html.count("<video") == len(panels) and "<img" not in html
+        # the clip stops where the GT panel loses its frame (past the real episode's end)
+        assert clip.start == 0 and clip.end == min(tl.n_steps, CLIP_STEPS, tl.episode_end_step or tl.n_steps) and clip.fps == pytest.approx(tl.fps * 0.25)
+        for (view, kind), uri in clip.uris.items():
+            with av.open(io.BytesIO(base64.b64decode(uri.split(",", 1)[1]))) as video:
+                frames = list(video.decode(video=0))
+            assert len(frames) == clip.end - clip.start
+            assert float(frames[-1].time) == pytest.approx((len(frames) - 1) / clip.fps, abs=2e-3)
+            # the clip's first frame is the panel's frame at the clip's first step (H.264 close)
+            shown = tab.loaded.frames.pair(view, clip.start)
+            jpeg = shown.imagined if kind == "imagined" else shown.gt
+            want = simplejpeg.decode_jpeg(base64.b64decode(jpeg.split(",", 1)[1]), colorspace="RGB").astype(float)
+            got = frames[0].to_ndarray(format="rgb24").astype(float)
+            h, w = got.shape[:2]
+            assert np.abs(got - want[:h, :w]).mean() < 8, f"{view}/{kind}: the clip does not show the panel's frames"
+        tab.pause()
+        assert tab._clip is None and "<video" not in tab.video.html.content and "<img" in tab.video.html.content
+        tab.set_step(0)
+        tab.play()  # again: the clips come from the frame cache
+        wait_until(lambda: tab._clip is not None, timeout=30, what="the cached clips")
+        assert tab._clip.uris == clip.uris
+        tab.speed = 0.5  # a clip is made for one speed: another goes back to images
+        tab.set_step(tab.step + 1)
+        assert "<video" not in tab.video.html.content
+        tab.pause()

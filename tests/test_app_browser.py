@@ -140,6 +140,44 @@ def test_play_button_and_step_keys(browser, app):
     page.close()
 
 
+# Frames the page's playing clip of the front view has presented (None until one plays).
+CLIP_FRAMES_PRESENTED = """() => {
+    const v = document.querySelector("video.inspector-frame[data-view='front'][data-kind='imagined']");
+    if (!v || v.paused || v.currentTime === 0) return null;
+    const q = v.getVideoPlaybackQuality(); return q.totalVideoFrames - q.droppedVideoFrames; }"""
+
+
+def test_playback_is_a_video_the_browser_presents_at_the_rollout_rate(browser):
+    """Playing the demo, every panel becomes a clip the browser plays by itself: it presents
+    frames at the clip's rate, where stepping images manages under one a second here (WebGL in
+    software). Pause brings back the images of the step playback stopped at."""
+    from inspector.sources import BUNDLED_DEMO
+
+    demo = serve([BUNDLED_DEMO], port=0, block=False)
+    try:
+        page, tab = new_page(browser, demo)
+        open_in_page(page, tab, demo, "prompt_train")
+        tab.speed = 0.5  # 15 frames/s and a 29 s clip: time to start on a busy machine
+        tab.play()
+        first = wait_until(lambda: page.evaluate(CLIP_FRAMES_PRESENTED), timeout=120, interval=0.05,
+                           what="the playback clip to play in the page")
+        start = time.monotonic()
+        page.wait_for_timeout(4000)
+        presented = (page.evaluate(CLIP_FRAMES_PRESENTED) or first) - first
+        rate = presented / (time.monotonic() - start)
+        assert rate >= 10, f"the clip presented {rate:.1f} frames/s (15 expected)"
+        kinds = page.evaluate("() => [...document.querySelectorAll('video.inspector-frame')]"
+                              ".map(v => v.dataset.view + '/' + v.dataset.kind).sort()")
+        assert kinds == sorted(f"{p.view}/{k}" for p in tab.pairs for k in ("imagined", "gt"))
+        tab.pause()
+        wait_until(lambda: not page.evaluate("() => !!document.querySelector('video')")
+                   and frame_sources(page).get("front/imagined") == tab.pairs[0].imagined,
+                   timeout=120, what="the paused step's images")
+        page.close()
+    finally:
+        demo.stop()
+
+
 def _settled_frames(page, timeout_s: float = 30.0) -> dict[str, str]:
     """The video panel's frames once two looks 0.5 s apart agree."""
     deadline = time.time() + timeout_s

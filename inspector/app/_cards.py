@@ -196,33 +196,42 @@ def error_card(title: str, error: BaseException) -> str:
 
 def video_grid(pairs: Sequence[FramePair], step: int, t_s: float,
                compare: dict[str, FramePair] | None = None, compare_tag: str | None = None,
-               large: bool = False) -> str:
+               large: bool = False, clips: dict[tuple[str, str], str] | None = None) -> str:
     """One row per view: the imagined frame beside the GT frame at the same time (and the compared
-    rollout's imagined frame), with the PSNR of each pair; ``large`` stacks one view's frames."""
+    rollout's imagined frame), with the PSNR of each pair; ``large`` stacks one view's frames.
+
+    ``clips`` maps (view, kind) to a playback clip's video URI: that cell plays it instead of
+    showing the step's frame (kind ``imagined``, ``gt`` or ``compare``).
+    """
     if not pairs:
         return f"<div style='{CARD};{MUTED}'>No video for this rollout.</div>"
     compare = compare or {}
+    clips = clips or {}
     rows = []
     for p in pairs:
         cells = []
         if p.has_imagined:
-            cells.append(_frame_cell(p.view, "imagined", p.imagined, p.status,
-                                     f"imagined · frame {p.imagined_index}", "#e8590c",
-                                     f"data-frame='{p.imagined_index}'"))
+            caption = "imagined · playing" if (p.view, "imagined") in clips else f"imagined · frame {p.imagined_index}"
+            cells.append(_frame_cell(p.view, "imagined", p.imagined, p.status, caption, "#e8590c",
+                                     f"data-frame='{p.imagined_index}'", clips.get((p.view, "imagined"))))
             gt_status = p.status if p.status != READY else (LOADING if p.gt_note == LOADING else
                                                              f"no GT frame ({p.gt_note})")
             gt_caption = "ground truth · same time"
         else:  # a camera with real frames only (a dataset episode's cameras)
             gt_status = p.status if p.status != READY else (p.gt_note or LOADING)
             gt_caption = f"camera · frame {p.gt_index}" if p.gt_index is not None else "camera"
-        cells.append(_frame_cell(p.view, "gt", p.gt, gt_status, gt_caption, "#2b8a3e", f"data-step='{step}'"))
+        cells.append(_frame_cell(p.view, "gt", p.gt, gt_status, gt_caption, "#2b8a3e", f"data-step='{step}'",
+                                 clips.get((p.view, "gt"))))
         c = compare.get(p.view)
         if c is not None:
             psnr_c = f" · PSNR {c.psnr_db:.1f} dB" if c.psnr_db is not None else ""
             cells.append(_frame_cell(p.view, "compare", c.imagined, c.status,
                                      f"{compare_tag or 'compared'} · imagined{psnr_c}", "#1c7ed6",
-                                     f"data-frame='{c.imagined_index}'"))
-        psnr = f"PSNR {p.psnr_db:.1f} dB" if p.psnr_db is not None else ("PSNR —" if p.has_imagined else "")
+                                     f"data-frame='{c.imagined_index}'", clips.get((p.view, "compare"))))
+        if clips:  # the frame changes faster than the server says: its PSNR is shown when paused
+            psnr = "PSNR on pause" if p.psnr_db is not None else ""
+        else:
+            psnr = f"PSNR {p.psnr_db:.1f} dB" if p.psnr_db is not None else ("PSNR —" if p.has_imagined else "")
         columns = 1 if large else len(cells)
         grid = f"display:grid;grid-template-columns:repeat({columns},minmax(0,1fr));gap:4px"
         rows.append(f"<div style='margin-bottom:6px'><div style='display:flex;justify-content:space-between;"
@@ -232,9 +241,14 @@ def video_grid(pairs: Sequence[FramePair], step: int, t_s: float,
             f"<div style='font-size:0.7rem;color:#6b7280'>t = {t_s:.2f} s · step {step}</div></div>")
 
 
-def _frame_cell(view: str, kind: str, src: str | None, status: str, caption: str, colour: str, data: str) -> str:
-    """One frame with its caption, or a grey box saying why there is none (loading, an error)."""
-    if src is not None:
+def _frame_cell(view: str, kind: str, src: str | None, status: str, caption: str, colour: str, data: str,
+                clip: str | None = None) -> str:
+    """One frame with its caption, a playing clip, or a grey box saying why there is none."""
+    if clip is not None:  # muted: browsers autoplay only muted media; canplay: autoplay may not start
+        body = (f"<video class='inspector-frame' data-view='{esc(view)}' data-kind='{kind}' src='{clip}' "
+                "autoplay muted playsinline disablepictureinpicture oncanplay='this.play()' "
+                "style='width:100%;display:block;border-radius:3px;background:#222'></video>")
+    elif src is not None:
         body = (f"<img class='inspector-frame' data-view='{esc(view)}' data-kind='{kind}' {data} src='{src}' "
                 "style='width:100%;display:block;border-radius:3px;background:#222'>")
     else:

@@ -15,6 +15,7 @@ since are decoded again in the background. The scrub path only looks frames up.
 from __future__ import annotations
 
 import base64
+import itertools
 import threading
 from collections import OrderedDict
 from collections.abc import Callable
@@ -118,6 +119,9 @@ class FramePair:
     gt_index: int | None = None
 
 
+_STORE_TOKENS = itertools.count()
+
+
 class FrameStore(Notifying):
     """Frames of one rollout's views, shared by every tab that shows the rollout.
 
@@ -155,6 +159,12 @@ class FrameStore(Notifying):
         self._sizes: dict[str, tuple[int, int]] = {}
         self.decoded = threading.Event()  # every view's frames are in the cache: ready to scrub
         self.done = threading.Event()  # ... and every view's PSNR is known (or failed)
+        self.token = next(_STORE_TOKENS)  # names this store's entries in the cache (playback clips)
+
+    @property
+    def cache(self) -> FrameCache:
+        """The server's frame cache this store fills (playback clips are kept there too)."""
+        return self._cache
 
     def _compared(self, view: str) -> bool:
         """The view has both imagined and GT frames: its fill computes PSNR."""

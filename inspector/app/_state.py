@@ -24,6 +24,7 @@ from __future__ import annotations
 import tempfile
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -31,12 +32,14 @@ import numpy as np
 
 from ..errors import InspectorError
 from ..units import JOINT_NAMES
+from . import _playback_clip
 from ._annotations import rollout_annotations, update_annotation
 from ._cards import error_card, esc, headline_metrics, rollout_card, unit, video_grid
 from ._catalog import Loaded
 from ._frames import FramePair
 from ._overview import OverviewPanel
 from ._panels import NO_COMPARE, ControlPanel, PlotPanel, VideoPanel
+from ._playback_clip import CLIP_STEPS, encode_clip
 from ._scene import TabScene
 
 if TYPE_CHECKING:
@@ -81,6 +84,8 @@ class TabState:
         self.export_result: str | None = None  # what the last export did (for tests and logs)
         self._play_generation = 0
         self._video_html = ""
+        self._clip: _Clip | None = None  # the playback clips the video panel is playing
+        self._next_clip: _Clip | None = None  # the ones encoded for the steps after them
         self._notes: dict[str, Any] = {}
         self._shown_chunk: int | None = None
         self._listener = self._on_frames  # one bound method, so it can be removed again
@@ -322,6 +327,13 @@ class TabState:
     def _render_video(self) -> None:
         loaded = self.loaded
         assert loaded is not None
+        if self.playing:
+            if self._clip is not None and self._clip.shows(self):
+                return  # the browser is playing these steps itself
+            if self._next_clip is not None and self._next_clip.shows(self):
+                self._show_next_clip()
+                return
+        self._clip = None
         tl = loaded.timeline
         shown = [v for v in loaded.frames.views if self.video.selected in (None, v)]
         self.pairs = [loaded.frames.pair(v, self.step) for v in shown]
@@ -384,8 +396,13 @@ class TabState:
             self.controls.play.icon = "player-pause"
             threading.Thread(target=self._play_loop, args=(self._play_generation,),
                              name=f"inspector-play-{self.client_id}", daemon=True).start()
+            if _playback_clip.ENABLED:
+                threading.Thread(target=self._play_clips, args=(self._play_generation,),
+                                 name=f"inspector-clip-{self.client_id}", daemon=True).start()
 
-    def pause(self) -> None:
+    def pause(self, at_end: bool = False) -> None:
+        """Stop playing. ``at_end``: playback reached the last step; a clip that ends there plays
+        on to its last frame, the last step's (a page that started it late is not cut short)."""
         with self.lock:
             if not self.playing:
                 return
@@ -395,6 +412,10 @@ class TabState:
             self._play_generation += 1
             self.controls.play.label = "Play"
             self.controls.play.icon = "player-play"
+            self._next_clip = None
+            plays_out = at_end and self._clip is not None and self._clip.end >= self.loaded.timeline.n_steps
+            if self.loaded is not None and self._clip is not None and not plays_out:
+                self._render_video()  # the step's frames again, where the clips stopped
 
     def _play_loop(self, generation: int) -> None:
         """Advance at ``fps * speed`` steps per second, drawing at most PLAYBACK_FPS times a second.
@@ -422,8 +443,56 @@ class TabState:
                 last_cursor = now if cursor else last_cursor
                 self.set_step(target, cursor=cursor)
                 if at_end:
-                    self.pause()
+                    self.pause(at_end=True)
                     return
+
+    def _play_clips(self, generation: int) -> None:
+        """Get the clips of the segment playback is in (from the frame cache, else encoded), swap
+        them in, then the next segment's, one ahead at most (see :mod:`._playback_clip`). Until
+        the first is ready, and whenever encoding falls behind, images play."""
+        segment = None
+        while True:
+            with self.lock:
+                if generation != self._play_generation or self.loaded is None:
+                    return
+                if segment is None:
+                    segment = self.step // CLIP_STEPS * CLIP_STEPS
+                if segment >= self.loaded.timeline.n_steps:
+                    return
+                clip = _Clip.plan(self, segment, CLIP_STEPS)
+            if clip is None:
+                return
+            try:
+                clip.encode()
+            except Exception:  # noqa: BLE001 - the images keep playing: nothing is lost
+                return
+            with self.lock:
+                if generation != self._play_generation or not self.playing:
+                    return
+                self._next_clip = clip
+                if clip.shows(self):
+                    self._show_next_clip()
+            # one clip ahead at most: wait until this one is on screen (or passed by)
+            while not self.closed.wait(0.05):
+                with self.lock:
+                    if generation != self._play_generation:
+                        return
+                    if self._next_clip is not clip or self.step >= clip.end:
+                        break
+            segment = clip.end
+
+    def _show_next_clip(self) -> None:
+        """Swap the prepared clip in, starting where playback is now."""
+        clip, self._next_clip = self._next_clip, None
+        assert clip is not None and self.loaded is not None
+        offset_s = (self.step - clip.start) / clip.fps
+        clips = {panel: f"{uri}#t={offset_s:.3f}" for panel, uri in clip.uris.items()}
+        self._clip = clip
+        self._video_html = video_grid(
+            self.pairs, self.step, float(self.loaded.timeline.t_s[self.step]), self.compare_pairs,
+            self.compare.timeline.tag if self.compare else None, large=self.video.selected is not None,
+            clips=clips)
+        self.video.html.content = self._video_html
 
     # ------------------------------------------------------------------------------------------
     # Notes and export
@@ -627,3 +696,77 @@ class TabState:
             self.plots.show_joint(joint)
             if self.loaded is not None:
                 self.plots.set_cursor(float(self.loaded.timeline.t_s[self.step]))
+
+
+class _Clip:
+    """The panels' frames for steps ``start``..``end`` - 1 at the playback rate, and what they
+    were made for (rollout, view selection, compared rollout, speed): a change of any of those
+    goes back to stepping images."""
+
+    def __init__(self, tab: TabState, start: int, end: int, panels: dict[tuple[str, str], list[str]]) -> None:
+        self.start, self.end, self.panels = start, end, panels
+        self.uris: dict[tuple[str, str], str] = {}  # panel -> the clip's video URI, once encoded
+        self.fps = tab.loaded.timeline.fps * tab.speed  # type: ignore[union-attr]
+        self._made_for = self._what(tab)
+        # Clips are kept in the server's frame cache, shared by the tabs showing the rollout (and
+        # the same compared rollout): a second Play of a segment starts at once.
+        frames = tab.loaded.frames  # type: ignore[union-attr]
+        self._cache = frames.cache
+        compare = tab.compare.frames.token if tab.compare is not None else None
+        self._keys = {panel: ("clip", frames.token, compare if panel[1] == "compare" else None, panel,
+                              start, end, round(self.fps, 6)) for panel in panels}
+
+    @staticmethod
+    def _what(tab: TabState) -> tuple:
+        return (tab.loaded, tab.video.selected, tab.compare, tab.speed)
+
+    def shows(self, tab: TabState) -> bool:
+        """Whether the clips still show what the tab would at its step."""
+        loaded, selected, compare, speed = self._made_for
+        return (self.start <= tab.step < self.end and tab.loaded is loaded and tab.compare is compare
+                and tab.video.selected == selected and tab.speed == speed)
+
+    @classmethod
+    def plan(cls, tab: TabState, start: int, steps: int) -> _Clip | None:
+        """The frames each panel shows for ``steps`` steps from ``start``, no further than every
+        panel has a frame at every step; None while frames are loading."""
+        loaded, cmp = tab.loaded, tab.compare
+        assert loaded is not None
+        views = [p.view for p in tab.pairs]
+        end = min(loaded.timeline.n_steps, start + steps)
+        panels: dict[tuple[str, str], list[str]] = {}
+        for step in range(start, end):
+            shown: dict[tuple[str, str], str | None] = {}
+            for view in views:
+                pair = loaded.frames.pair(view, step)
+                if pair.has_imagined:
+                    shown[(view, "imagined")] = pair.imagined
+                shown[(view, "gt")] = pair.gt
+                if cmp is not None and view in cmp.frames.imagined_views:
+                    shown[(view, "compare")] = cmp.frames.pair(view, min(step, cmp.timeline.n_steps - 1)).imagined
+            if step == start:
+                shown = {panel: uri for panel, uri in shown.items() if uri is not None}
+                if not shown:
+                    return None
+                panels = {panel: [] for panel in shown}
+            if any(shown.get(panel) is None for panel in panels):
+                end = step  # a panel loses its frame here (loading, past the episode's end)
+                break
+            for panel in panels:
+                panels[panel].append(shown[panel])  # type: ignore[arg-type]
+        if end - start < 2:
+            return None
+        return cls(tab, start, end, panels)
+
+    def encode(self) -> None:
+        """Every panel's clip: from the cache, else encoded (in parallel: the encoder and the JPEG
+        decoder release the GIL) and cached."""
+        self.uris = {panel: uri for panel in self.panels if (uri := self._cache.get(self._keys[panel])) is not None}
+        todo = {panel: uris for panel, uris in self.panels.items() if panel not in self.uris}
+        if todo:
+            with ThreadPoolExecutor(max_workers=len(todo), thread_name_prefix="inspector-clip") as pool:
+                futures = {panel: pool.submit(encode_clip, uris, self.fps) for panel, uris in todo.items()}
+                for panel, future in futures.items():
+                    self.uris[panel] = future.result()
+                    self._cache.put(self._keys[panel], self.uris[panel])
+        self.panels = {}  # the JPEGs stay in the frame cache; the clips are what is needed now
