@@ -396,12 +396,13 @@ def test_playback_swaps_in_clips_of_the_shown_frames_and_back(app):
     client, tab = connect(app)
     with client:
         tab.open(key(app, "ep000_train"))
-        wait_until(tab.loaded.frames.done.is_set, what="the frames")
+        wait_until(tab.loaded.frames.done.is_set, timeout=120, what="the frames")
         tl = tab.loaded.timeline
         tab.speed = 0.25  # a slow clock: the clip is ready long before playback ends
         tab.play()
         wait_until(lambda: tab._clip is not None, timeout=120, what="the playback clips")
-        clip, html = tab._clip, tab.video.html.content
+        with tab.lock:
+            clip, html = tab._clip, tab.video.html.content
         panels = {(p.view, "imagined") for p in tab.pairs if p.imagined} | {(p.view, "gt") for p in tab.pairs if p.gt}
         assert set(clip.uris) == panels and html.count("<video") == len(panels) and "<img" not in html
         # the clip stops where the GT panel loses its frame (past the real episode's end)

@@ -487,12 +487,12 @@ class TabState:
         assert clip is not None and self.loaded is not None
         offset_s = (self.step - clip.start) / clip.fps
         clips = {panel: f"{uri}#t={offset_s:.3f}" for panel, uri in clip.uris.items()}
-        self._clip = clip
         self._video_html = video_grid(
             self.pairs, self.step, float(self.loaded.timeline.t_s[self.step]), self.compare_pairs,
             self.compare.timeline.tag if self.compare else None, large=self.video.selected is not None,
             clips=clips)
         self.video.html.content = self._video_html
+        self._clip = clip  # last: whoever sees it set finds the page sent the clips
 
     # ------------------------------------------------------------------------------------------
     # Notes and export
