@@ -10,6 +10,7 @@ a one-line error instead of exhausting the machine.
 
 from __future__ import annotations
 
+import io
 import os
 from dataclasses import dataclass
 from fractions import Fraction
@@ -326,33 +327,58 @@ def encode_h264(path: str | Path, frames: Iterable[npt.NDArray[np.uint8]], fps: 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}.mp4")
-    n = 0
     try:
         with av.open(str(tmp), mode="w") as container:
-            stream = None
-            for image in frames:
-                image = np.asarray(image)
-                if image.ndim != 3 or image.shape[-1] != 3 or image.dtype != np.uint8:
-                    raise InspectorError(path, f"video frames: expected (H, W, 3) uint8, found "
-                                               f"{image.shape} {image.dtype}")
-                h, w = image.shape[:2]
-                if stream is None:
-                    stream = container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1001))
-                    stream.width, stream.height = w + w % 2, h + h % 2
-                    stream.pix_fmt = "yuv420p"
-                    stream.options = {"crf": str(crf), "preset": preset}
-                if (h + h % 2, w + w % 2) != (stream.height, stream.width):
-                    raise InspectorError(path, f"video frames: frame {n} is {w}x{h}, the first was "
-                                               f"{stream.width}x{stream.height}")
-                if h % 2 or w % 2:
-                    image = np.pad(image, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")
-                frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(image), format="rgb24")
-                container.mux(stream.encode(frame))
-                n += 1
-            if stream is None:
-                raise InspectorError(path, "video frames: none to write")
-            container.mux(stream.encode())
+            n = _encode_h264_into(container, frames, fps, crf, preset, path)
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
+    return n
+
+
+def encode_h264_bytes(frames: Iterable[npt.NDArray[np.uint8]], fps: float, crf: int = 23,
+                      preset: str = "medium", name: str = "video", keyframe_every: int | None = None) -> bytes:
+    """:func:`encode_h264` into memory: the MP4 file's bytes (``name`` labels errors).
+
+    ``keyframe_every`` frames at most between keyframes (x264's default: 250) bounds what a player
+    decodes to seek.
+    """
+    import av
+
+    buffer = io.BytesIO()
+    with av.open(buffer, mode="w", format="mp4") as container:
+        _encode_h264_into(container, frames, fps, crf, preset, name, keyframe_every)
+    return buffer.getvalue()
+
+
+def _encode_h264_into(container, frames: Iterable[npt.NDArray[np.uint8]], fps: float, crf: int, preset: str,
+                      where: str | Path, keyframe_every: int | None = None) -> int:
+    import av
+
+    stream = None
+    n = 0
+    for image in frames:
+        image = np.asarray(image)
+        if image.ndim != 3 or image.shape[-1] != 3 or image.dtype != np.uint8:
+            raise InspectorError(where, f"video frames: expected (H, W, 3) uint8, found "
+                                        f"{image.shape} {image.dtype}")
+        h, w = image.shape[:2]
+        if stream is None:
+            stream = container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1001))
+            stream.width, stream.height = w + w % 2, h + h % 2
+            stream.pix_fmt = "yuv420p"
+            stream.options = {"crf": str(crf), "preset": preset}
+            if keyframe_every is not None:
+                stream.options = {**stream.options, "g": str(keyframe_every)}
+        if (h + h % 2, w + w % 2) != (stream.height, stream.width):
+            raise InspectorError(where, f"video frames: frame {n} is {w}x{h}, the first was "
+                                        f"{stream.width}x{stream.height}")
+        if h % 2 or w % 2:
+            image = np.pad(image, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")
+        frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(image), format="rgb24")
+        container.mux(stream.encode(frame))
+        n += 1
+    if stream is None:
+        raise InspectorError(where, "video frames: none to write")
+    container.mux(stream.encode())
     return n

@@ -147,6 +147,13 @@ CLIP_FRAMES_PRESENTED = """() => {
     const q = v.getVideoPlaybackQuality(); return q.totalVideoFrames - q.droppedVideoFrames; }"""
 
 
+CLIP_TIME_SHOWN = """() => {
+    const g = document.querySelector('.inspector-video');
+    const v = g.querySelector("video.inspector-frame[data-view='front'][data-kind='imagined']");
+    return {caption: g.querySelector('.inspector-time').textContent, t: v.currentTime,
+            first: +g.dataset.clipFirst}; }"""
+
+
 def test_playback_is_a_video_the_browser_presents_at_the_rollout_rate(browser):
     """Playing the demo, every panel becomes a clip the browser plays by itself: it presents
     frames at the clip's rate, where stepping images manages under one a second here (WebGL in
@@ -169,6 +176,13 @@ def test_playback_is_a_video_the_browser_presents_at_the_rollout_rate(browser):
         kinds = page.evaluate("() => [...document.querySelectorAll('video.inspector-frame')]"
                               ".map(v => v.dataset.view + '/' + v.dataset.kind).sort()")
         assert kinds == sorted(f"{p.view}/{k}" for p in tab.pairs for k in ("imagined", "gt"))
+        # the time under the frames is the step the clip shows, not the step it started from
+        shown = page.evaluate(CLIP_TIME_SHOWN)
+        match = re.fullmatch(r"t = (\d+\.\d\d) s · step (\d+) · playing", shown["caption"])
+        assert match, shown["caption"]
+        clip_step = shown["first"] + shown["t"] * 15  # the clip's step by its own clock, 15 frames/s
+        assert abs(int(match[2]) - clip_step) <= 8 and int(match[2]) > shown["first"], shown
+        assert float(match[1]) == pytest.approx(int(match[2]) / 30, abs=0.006)
         tab.pause()
         wait_until(lambda: not page.evaluate("() => !!document.querySelector('video')")
                    and frame_sources(page).get("front/imagined") == tab.pairs[0].imagined,

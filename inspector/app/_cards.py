@@ -196,12 +196,15 @@ def error_card(title: str, error: BaseException) -> str:
 
 def video_grid(pairs: Sequence[FramePair], step: int, t_s: float,
                compare: dict[str, FramePair] | None = None, compare_tag: str | None = None,
-               large: bool = False, clips: dict[tuple[str, str], str] | None = None) -> str:
+               large: bool = False, clips: dict[tuple[str, str], str] | None = None,
+               clip_clock: tuple[int, int, float, float] | None = None) -> str:
     """One row per view: the imagined frame beside the GT frame at the same time (and the compared
     rollout's imagined frame), with the PSNR of each pair; ``large`` stacks one view's frames.
 
     ``clips`` maps (view, kind) to a playback clip's video URI: that cell plays it instead of
-    showing the step's frame (kind ``imagined``, ``gt`` or ``compare``).
+    showing the step's frame (kind ``imagined``, ``gt`` or ``compare``). ``clip_clock`` (the clips'
+    first and end step, their frames/s, the rollout's steps/s) lets the time line under the frames
+    follow the playing clip in the page rather than stand at the step it started from.
     """
     if not pairs:
         return f"<div style='{CARD};{MUTED}'>No video for this rollout.</div>"
@@ -237,8 +240,21 @@ def video_grid(pairs: Sequence[FramePair], step: int, t_s: float,
         rows.append(f"<div style='margin-bottom:6px'><div style='display:flex;justify-content:space-between;"
                     f"font-size:0.72rem'><b>{esc(p.view)}</b><span>{psnr}</span></div>"
                     f"<div style='{grid}'>{''.join(cells)}</div></div>")
-    return (f"<div class='inspector-video' data-step='{step}' style='font-family:sans-serif'>{''.join(rows)}"
-            f"<div style='font-size:0.7rem;color:#6b7280'>t = {t_s:.2f} s · step {step}</div></div>")
+    clock = ""
+    if clips and clip_clock is not None:
+        first, end, clip_fps, steps_per_s = clip_clock
+        clock = (f" data-clip-first='{first}' data-clip-end='{end}' data-clip-fps='{clip_fps:.6g}'"
+                 f" data-steps-per-s='{steps_per_s:.6g}'")
+    return (f"<div class='inspector-video' data-step='{step}'{clock} style='font-family:sans-serif'>{''.join(rows)}"
+            f"<div class='inspector-time' style='font-size:0.7rem;color:#6b7280'>t = {t_s:.2f} s · step {step}</div></div>")
+
+
+# The page's side of ``clip_clock``: the step a playing clip shows, written under the frames as the
+# clip's time advances (every panel's clip runs the same clock; whichever reports last writes).
+_FOLLOW_CLIP_CLOCK = (
+    "const g=this.closest('.inspector-video'),d=g&&g.dataset;if(!d||!d.clipFps)return;"
+    "const s=Math.min(+d.clipEnd-1,+d.clipFirst+Math.floor(this.currentTime*d.clipFps+1e-3));"
+    "g.querySelector('.inspector-time').textContent='t = '+(s/d.stepsPerS).toFixed(2)+' s \u00b7 step '+s+' \u00b7 playing'")
 
 
 def _frame_cell(view: str, kind: str, src: str | None, status: str, caption: str, colour: str, data: str,
@@ -247,6 +263,7 @@ def _frame_cell(view: str, kind: str, src: str | None, status: str, caption: str
     if clip is not None:  # muted: browsers autoplay only muted media; canplay: autoplay may not start
         body = (f"<video class='inspector-frame' data-view='{esc(view)}' data-kind='{kind}' src='{clip}' "
                 "autoplay muted playsinline disablepictureinpicture oncanplay='this.play()' "
+                f"ontimeupdate=\"{_FOLLOW_CLIP_CLOCK}\" "
                 "style='width:100%;display:block;border-radius:3px;background:#222'></video>")
     elif src is not None:
         body = (f"<img class='inspector-frame' data-view='{esc(view)}' data-kind='{kind}' {data} src='{src}' "

@@ -335,18 +335,25 @@ class TabState:
                 return
         self._clip = None
         tl = loaded.timeline
-        shown = [v for v in loaded.frames.views if self.video.selected in (None, v)]
-        self.pairs = [loaded.frames.pair(v, self.step) for v in shown]
         cmp = self.compare
-        self.compare_pairs = {}
-        if cmp is not None:
-            cmp_step = min(self.step, cmp.timeline.n_steps - 1)
-            self.compare_pairs = {v: cmp.frames.pair(v, cmp_step) for v in shown if v in cmp.frames.imagined_views}
+        self.pairs, self.compare_pairs = self._pairs_at(self.step)
         html = video_grid(self.pairs, self.step, float(tl.t_s[self.step]), self.compare_pairs,
                           cmp.timeline.tag if cmp is not None else None, large=self.video.selected is not None)
         if html != self._video_html:  # the GT frame often stays while the imagined one moves
             self._video_html = html
             self.video.html.content = html
+
+    def _pairs_at(self, step: int) -> tuple[list[FramePair], dict[str, FramePair]]:
+        """What the video panel shows at ``step``: a pair per view shown, and by view the
+        compared rollout's frames (at its last step once it is shorter)."""
+        loaded, cmp = self.loaded, self.compare
+        assert loaded is not None
+        shown = [v for v in loaded.frames.views if self.video.selected in (None, v)]
+        pairs = [loaded.frames.pair(v, step) for v in shown]
+        if cmp is None:
+            return pairs, {}
+        cmp_step = min(step, cmp.timeline.n_steps - 1)
+        return pairs, {v: cmp.frames.pair(v, cmp_step) for v in shown if v in cmp.frames.imagined_views}
 
     def _show_time(self, source=None) -> None:
         tl = self.loaded.timeline  # type: ignore[union-attr]
@@ -487,10 +494,11 @@ class TabState:
         assert clip is not None and self.loaded is not None
         offset_s = (self.step - clip.start) / clip.fps
         clips = {panel: f"{uri}#t={offset_s:.3f}" for panel, uri in clip.uris.items()}
+        tl = self.loaded.timeline
         self._video_html = video_grid(
-            self.pairs, self.step, float(self.loaded.timeline.t_s[self.step]), self.compare_pairs,
+            self.pairs, self.step, float(tl.t_s[self.step]), self.compare_pairs,
             self.compare.timeline.tag if self.compare else None, large=self.video.selected is not None,
-            clips=clips)
+            clips=clips, clip_clock=(clip.start, clip.end, clip.fps, tl.fps))
         self.video.html.content = self._video_html
         self._clip = clip  # last: whoever sees it set finds the page sent the clips
 
@@ -730,20 +738,19 @@ class _Clip:
     def plan(cls, tab: TabState, start: int, steps: int) -> _Clip | None:
         """The frames each panel shows for ``steps`` steps from ``start``, no further than every
         panel has a frame at every step; None while frames are loading."""
-        loaded, cmp = tab.loaded, tab.compare
+        loaded = tab.loaded
         assert loaded is not None
-        views = [p.view for p in tab.pairs]
         end = min(loaded.timeline.n_steps, start + steps)
         panels: dict[tuple[str, str], list[str]] = {}
         for step in range(start, end):
+            pairs, compare_pairs = tab._pairs_at(step)
             shown: dict[tuple[str, str], str | None] = {}
-            for view in views:
-                pair = loaded.frames.pair(view, step)
+            for pair in pairs:
                 if pair.has_imagined:
-                    shown[(view, "imagined")] = pair.imagined
-                shown[(view, "gt")] = pair.gt
-                if cmp is not None and view in cmp.frames.imagined_views:
-                    shown[(view, "compare")] = cmp.frames.pair(view, min(step, cmp.timeline.n_steps - 1)).imagined
+                    shown[(pair.view, "imagined")] = pair.imagined
+                shown[(pair.view, "gt")] = pair.gt
+            for view, pair in compare_pairs.items():
+                shown[(view, "compare")] = pair.imagined
             if step == start:
                 shown = {panel: uri for panel, uri in shown.items() if uri is not None}
                 if not shown:
