@@ -169,6 +169,25 @@ def test_whole_clip_decoding_refuses_past_its_budget(tmp_path):
     assert exc.value.file == str(clip) and "\n" not in str(exc.value)
 
 
+def test_frames_at_their_own_size_skip_the_area_filter_with_the_same_pixels(tmp_path):
+    """Converting a frame without scaling takes swscale's fast path; the pixels (hence every PSNR)
+    are those the area filter gives."""
+    import av
+
+    from inspector.video import RgbConverter
+
+    clip = tmp_path / "c.mp4"
+    encode_h264(clip, _moving_frames(12, 322, 182), fps=30, preset="ultrafast")
+    to_rgb = RgbConverter()
+    with av.open(str(clip)) as container:
+        for frame in container.decode(video=0):
+            area = frame.reformat(width=frame.width, height=frame.height, format="rgb24",
+                                  interpolation="AREA").to_ndarray()
+            assert np.array_equal(to_rgb(frame), area)
+            assert np.array_equal(to_rgb(frame, (frame.width, frame.height)), area)
+            assert to_rgb(frame, (160, 90)).shape == (90, 160, 3)
+
+
 @pytest.mark.slow
 def test_frames_past_8k_are_refused_in_one_line(tmp_path):
     clip = tmp_path / "huge.mp4"
