@@ -20,7 +20,9 @@ import argparse
 import contextlib
 import json
 import os
+import re
 import socket
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -461,6 +463,70 @@ def bench_playback(tmp: Path, quick: bool) -> list[Figure]:
                    "playing meanwhile; baseline: a second Play (clips cached)")]
 
 
+def bench_keys(tmp: Path, quick: bool) -> list[Figure]:
+    """The Chunk slider's thumb stepped with the arrow key in headless Chromium (WebGL in software):
+    median time from the key press to the next chunk's imagined frame painted, beside the same
+    page with its 3D canvas hidden (what the arm redraw costs a page without a GPU)."""
+    sys.path.insert(0, str(REPO / "tests"))
+    from browser import launch, open_app, page_client_id, select_option, skip_reason, slider_thumb, wait_until
+
+    if (reason := skip_reason()) is not None:
+        print(f"  keys: skipped ({reason})", file=sys.stderr)
+        return []
+    from playwright.sync_api import sync_playwright
+
+    from inspector.app import serve
+
+    # in the page: ms from each key press to the first animation frame showing another frame
+    record = """() => { window.__ms = []; let t0 = null, before = null;
+        const shown = () => { const e = document.querySelector("img.inspector-frame[data-kind='imagined']");
+                              return e && e.getAttribute('data-frame'); };
+        document.addEventListener('keydown', () => { t0 = performance.now(); before = shown(); }, true);
+        const tick = () => { if (t0 !== null && shown() !== before) { window.__ms.push(performance.now() - t0); t0 = null; }
+                             requestAnimationFrame(tick); }; tick(); }"""
+    presses = 5 if quick else 9
+    medians: dict[bool, tuple[float, float]] = {}
+    app = serve([DEMO], port=0, block=False)
+    try:
+        with sync_playwright() as pw:
+            browser = launch(pw)
+            for hidden in (False, True):
+                page = browser.new_page(viewport={"width": 1600, "height": 1000})
+                open_app(page, app.url)
+                if hidden:
+                    page.add_style_tag(content="canvas{display:none !important}")
+                tab = wait_until(lambda: app.tabs.get(page_client_id(page)), what="the tab")
+                key = next(k for k, e in app.catalog.entries.items() if e.tag == "prompt_train")
+                select_option(page, "Rollout", key)
+                wait_until(lambda: tab.key == key and tab.loaded is not None and tab.loaded.frames.done.is_set(),
+                           timeout=120, what="the rollout's frames")
+                page.wait_for_timeout(2000)
+                page.evaluate(record)
+                thumb = slider_thumb(page, re.compile(r"^Chunk$"))
+                thumb.focus()
+                to_server = []
+                for _ in range(presses):
+                    step, painted = tab.step, page.evaluate("() => window.__ms.length")
+                    t0 = time.monotonic()
+                    page.keyboard.press("ArrowRight")
+                    wait_until(lambda: tab.step != step, timeout=60, interval=0.005, what="the server's step")
+                    to_server.append((time.monotonic() - t0) * 1e3)
+                    wait_until(lambda: page.evaluate("() => window.__ms.length") > painted, timeout=60,
+                               interval=0.02, what="the next frame painted")
+                    page.wait_for_timeout(300)
+                medians[hidden] = (statistics.median(page.evaluate("() => window.__ms")),
+                                   statistics.median(to_server))
+                page.close()
+            browser.close()
+    finally:
+        app.stop()
+    (painted, server), (painted_hidden, server_hidden) = medians[False], medians[True]
+    return [Figure("slider_key", painted, "ms", "median < 100 ms", painted < 100, baseline=painted_hidden,
+                   note=f"headless Chromium, 1600x1000, demo prompt_train, Chunk thumb, ArrowRight, median of "
+                        f"{presses}: key to the next frame painted; at the server after {server:.0f} ms "
+                        f"({server_hidden:.0f} ms with the canvas hidden); baseline: 3D canvas hidden")]
+
+
 @contextlib.contextmanager
 def _serve(args: Sequence[str], env: dict[str, str]) -> Iterator[tuple[subprocess.Popen, int]]:
     port = _free_port()
@@ -548,7 +614,7 @@ def _fmt(value: float | None, unit: str) -> str:
         return "-"
     if unit == "configurations/s":
         return f"{value / 1e6:.2f} M/s" if value >= 1e5 else f"{value / 1e3:.1f} k/s"
-    return f"{value:.3g} {unit}"
+    return f"{value:,.0f} {unit}" if abs(value) >= 1000 else f"{value:.3g} {unit}"
 
 
 def _mib(value: float | None) -> str:
@@ -559,7 +625,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="smaller counts, fewer repetitions")
     parser.add_argument("--json", type=Path, help="also write the figures as JSON")
-    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback")
+    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback keys")
     args = parser.parse_args(argv)
 
     figures: list[Figure] = []
@@ -575,6 +641,7 @@ def main(argv: list[str] | None = None) -> int:
             ("scrub", lambda: bench_scrub(tmp, args.quick)),
             ("serve", lambda: bench_serve(tmp, args.quick)),
             ("playback", lambda: bench_playback(tmp, args.quick)),
+            ("keys", lambda: bench_keys(tmp, args.quick)),
         ]
         for name, run in runs:
             if args.only and name not in args.only:
