@@ -393,7 +393,7 @@ def bench_playback(tmp: Path, quick: bool) -> list[Figure]:
     (clips off, what playback was before). Also: seconds from Play to the clip's first frame, the
     first time (clips encoded) and again (cached)."""
     sys.path.insert(0, str(REPO / "tests"))
-    from browser import launch, open_app, page_client_id, select_option, skip_reason, wait_until
+    from browser import launch, skip_reason, wait_until
 
     if (reason := skip_reason()) is not None:
         print(f"  playback: skipped ({reason})", file=sys.stderr)
@@ -419,14 +419,7 @@ def bench_playback(tmp: Path, quick: bool) -> list[Figure]:
             browser = launch(pw)
             for clips in (True, False):
                 _playback_clip.ENABLED = clips
-                page = browser.new_page(viewport={"width": 1600, "height": 1000})
-                open_app(page, app.url)
-                tab = wait_until(lambda: app.tabs.get(page_client_id(page)), what="the tab")
-                key = next(k for k, e in app.catalog.entries.items() if e.tag == "prompt_train")
-                select_option(page, "Rollout", key)
-                wait_until(lambda: tab.key == key and tab.loaded is not None and tab.loaded.frames.done.is_set(),
-                           timeout=120, what="the rollout's frames")
-                page.wait_for_timeout(2000)
+                page, tab = _demo_page(browser, app)
                 if clips:
                     for attempt in ("first", "again"):  # the first Play encodes; the second finds them cached
                         tab.set_step(0)
@@ -463,12 +456,30 @@ def bench_playback(tmp: Path, quick: bool) -> list[Figure]:
                    "playing meanwhile; baseline: a second Play (clips cached)")]
 
 
+def _demo_page(browser, app, hide_canvas: bool = False):
+    """A 1600x1000 page of ``app`` showing the demo's ``prompt_train``, its frames all ready:
+    (page, its tab)."""
+    from browser import open_app, page_client_id, select_option, wait_until
+
+    page = browser.new_page(viewport={"width": 1600, "height": 1000})
+    open_app(page, app.url)
+    if hide_canvas:
+        page.add_style_tag(content="canvas{display:none !important}")
+    tab = wait_until(lambda: app.tabs.get(page_client_id(page)), what="the tab")
+    key = next(k for k, e in app.catalog.entries.items() if e.tag == "prompt_train")
+    select_option(page, "Rollout", key)
+    wait_until(lambda: tab.key == key and tab.loaded is not None and tab.loaded.frames.done.is_set(),
+               timeout=120, what="the rollout's frames")
+    page.wait_for_timeout(2000)
+    return page, tab
+
+
 def bench_keys(tmp: Path, quick: bool) -> list[Figure]:
     """The Chunk slider's thumb stepped with the arrow key in headless Chromium (WebGL in software):
     median time from the key press to the next chunk's imagined frame painted, beside the same
     page with its 3D canvas hidden (what the arm redraw costs a page without a GPU)."""
     sys.path.insert(0, str(REPO / "tests"))
-    from browser import launch, open_app, page_client_id, select_option, skip_reason, slider_thumb, wait_until
+    from browser import launch, skip_reason, slider_thumb, wait_until
 
     if (reason := skip_reason()) is not None:
         print(f"  keys: skipped ({reason})", file=sys.stderr)
@@ -491,16 +502,7 @@ def bench_keys(tmp: Path, quick: bool) -> list[Figure]:
         with sync_playwright() as pw:
             browser = launch(pw)
             for hidden in (False, True):
-                page = browser.new_page(viewport={"width": 1600, "height": 1000})
-                open_app(page, app.url)
-                if hidden:
-                    page.add_style_tag(content="canvas{display:none !important}")
-                tab = wait_until(lambda: app.tabs.get(page_client_id(page)), what="the tab")
-                key = next(k for k, e in app.catalog.entries.items() if e.tag == "prompt_train")
-                select_option(page, "Rollout", key)
-                wait_until(lambda: tab.key == key and tab.loaded is not None and tab.loaded.frames.done.is_set(),
-                           timeout=120, what="the rollout's frames")
-                page.wait_for_timeout(2000)
+                page, tab = _demo_page(browser, app, hide_canvas=hidden)
                 page.evaluate(record)
                 thumb = slider_thumb(page, re.compile(r"^Chunk$"))
                 thumb.focus()
