@@ -127,7 +127,8 @@ class MetricsCache:
             fd, tmp = tempfile.mkstemp(prefix=".", suffix=".tmp", dir=path.parent)
             try:
                 with os.fdopen(fd, "w") as fh:
-                    json.dump({**record, "schema": SCHEMA}, fh, allow_nan=False)
+                    # dumps, not dump: dump streams through the pure-Python encoder (5x slower)
+                    fh.write(json.dumps({**record, "schema": SCHEMA}, allow_nan=False))
                 os.replace(tmp, path)
             except BaseException:
                 Path(tmp).unlink(missing_ok=True)

@@ -273,10 +273,12 @@ def _dtw_block(p: npt.NDArray[np.float64], g: npt.NDArray[np.float64]) -> tuple[
 
 def _dtw_backtrack(p: npt.NDArray[np.float64], g: npt.NDArray[np.float64], direction: npt.NDArray[np.uint8]
                    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """Walk every optimal path of a block back from (T-1, G-1) to (0, 0) together.
+    """Walk each optimal path of a block back from (T-1, G-1) to (0, 0), then measure its cells.
 
-    Each cell names its predecessor in ``direction`` (B, T, G); each visited cell is measured
-    exactly in float64.
+    Each cell names its predecessor in ``direction`` (B, T, G). The walk is a plain loop over a
+    byte view of the table (under a microsecond a cell; a vectorised walk over the block paid
+    ~30 numpy calls a step). Every visited cell is then measured exactly in float64, all paths at
+    once, and summed per step in the order the walk visited them.
 
     Returns:
         (drift, total, length): (B, T) mean distance of the cells aligned to each predicted
@@ -284,33 +286,40 @@ def _dtw_backtrack(p: npt.NDArray[np.float64], g: npt.NDArray[np.float64], direc
     """
     B, T, _ = p.shape
     G = g.shape[0]
-    total = np.zeros(B)
-    drift_sum = np.zeros((B, T))
-    drift_cnt = np.zeros((B, T))
-    length = np.zeros(B)
-    bi = np.full(B, T - 1)
-    bj = np.full(B, G - 1)
-    rows = np.arange(B)
-    for _ in range(T + G - 1):  # every path has at most T + G - 1 cells
-        active = bi >= 0
-        if not active.any():
-            break
-        r, i, j = rows[active], bi[active], bj[active]
-        d = np.linalg.norm(p[r, i] - g[j], axis=-1)
-        drift_sum[r, i] += d  # each rollout appears once per step: no repeated index
-        total[r] += d
-        drift_cnt[r, i] += 1
-        length[r] += 1
-        done = (i == 0) & (j == 0)
-        code = direction[r, i, j]
-        left = (code & _LEFT_BIT) != 0
-        up = ~left & ((code & _UP_BIT) != 0)
-        # along the table's first row only a left move stays inside it, along its first column up
-        left = (i == 0) | (left & (j != 0))
-        up = (j == 0) | (up & (i != 0))
-        bi[r] = np.where(done, -1, i - (~left).astype(np.int64))
-        bj[r] = np.where(done, -1, j - (~up).astype(np.int64))
-    return drift_sum / np.maximum(drift_cnt, 1), total, length
+    path_i: list[int] = []
+    path_j: list[int] = []
+    path_len = np.empty(B, np.int64)
+    for b in range(B):
+        codes = memoryview(np.ascontiguousarray(direction[b])).cast("B")  # codes[i * G + j]
+        i, j = T - 1, G - 1
+        start = len(path_i)
+        while True:
+            path_i.append(i)
+            path_j.append(j)
+            if i == 0:  # along the table's first row only a left move stays inside it
+                if j == 0:
+                    break
+                j -= 1
+            elif j == 0:  # along its first column only an up move
+                i -= 1
+            else:
+                code = codes[i * G + j]
+                if code & _LEFT_BIT:
+                    j -= 1
+                elif code & _UP_BIT:
+                    i -= 1
+                else:
+                    i -= 1
+                    j -= 1
+        path_len[b] = len(path_i) - start
+    owner = np.repeat(np.arange(B), path_len)
+    rows, cols = np.array(path_i, np.int64), np.array(path_j, np.int64)
+    d = np.linalg.norm(p[owner, rows] - g[cols], axis=-1)
+    cell = owner * T + rows
+    drift_sum = np.bincount(cell, weights=d, minlength=B * T).reshape(B, T)
+    drift_cnt = np.bincount(cell, minlength=B * T).reshape(B, T)
+    total = np.bincount(owner, weights=d, minlength=B)
+    return drift_sum / np.maximum(drift_cnt, 1), total, path_len.astype(np.float64)
 
 
 # ----------------------------------------------------------------------------------------------
