@@ -6,15 +6,11 @@ screen reader reads an unnamed field, and ``get_by_label`` finds none. Each page
 below once; it gives such a field the id its label points to, and again whenever the panel is
 re-rendered (a folder opened, a control shown again). React leaves an id it did not change alone,
 so typing into the field keeps it.
-
-The script rides in the panel's title HTML as an image's ``onerror`` (an empty data URL fails at
-once), so it arrives with the GUI: viser applies a batch of GUI messages at once, but holds a
-batch that carries anything else until the 3D canvas draws a frame, seconds in software WebGL.
 """
 
 from __future__ import annotations
 
-from html import escape
+from viser import _messages
 
 # A field is looked for only within a few levels above its label (label < p < div < the control's
 # row), and only one without a label of its own, so a label never claims another control's field.
@@ -43,5 +39,7 @@ link();
 """
 
 
-# The element that runs the script once, placed in an HTML control that is never re-rendered.
-LABEL_IDS_HTML = f'<img src="data:," alt="" hidden onerror="{escape(LABEL_IDS_JS, quote=True)}">'
+def install_label_ids(client) -> None:
+    """Have ``client``'s page run :data:`LABEL_IDS_JS` (viser runs such a message's source as a
+    function body; there is no public call for it in viser 1.1.1)."""
+    client._websock_connection.queue_message(_messages.RunJavascriptMessage(source=LABEL_IDS_JS))

@@ -15,7 +15,6 @@ from ..metrics import prompt_divergence
 from ..timeline import RolloutTimeline
 from ..units import JOINT_NAMES
 from ._cards import unit
-from ._label_ids import LABEL_IDS_HTML
 from ._plots import CursorPlot, Line
 
 SPEEDS = ("0.25x", "0.5x", "1x", "2x", "4x")
@@ -35,7 +34,7 @@ class ControlPanel:
         options = list(self.option_to_key) or ["(no rollouts)"]
         # data-inspector-client lets a test find the server-side tab of a page.
         gui.add_html(f"<div data-inspector-client='{int(client_id)}' style='font-weight:600;"
-                     f"font-size:0.95rem;padding:0 0.2rem'>SO-101 rollout inspector{LABEL_IDS_HTML}</div>")
+                     "font-size:0.95rem;padding:0 0.2rem'>SO-101 rollout inspector</div>")
         # the whole evaluation in one table (see ._overview, which wires it)
         self.show_overview = gui.add_button("Overview", icon="table", hint="Every served rollout in one table")
         self.picker = gui.add_dropdown("Rollout", options, initial_value=options[0])
