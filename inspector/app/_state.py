@@ -37,7 +37,6 @@ from ._annotations import rollout_annotations, update_annotation
 from ._cards import error_card, esc, headline_metrics, rollout_card, unit, video_grid
 from ._catalog import Loaded
 from ._frames import FramePair
-from ._label_ids import install_label_ids
 from ._overview import OverviewPanel
 from ._panels import NO_COMPARE, ControlPanel, PlotPanel, VideoPanel
 from ._playback_clip import CLIP_STEPS, encode_clip
@@ -106,7 +105,6 @@ class TabState:
             gui.main_panel.set_width(LEFT_PANEL_PX)
             self.right_panel.dock_right()
             self.right_panel.set_width(RIGHT_PANEL_PX)
-        install_label_ids(client)  # the notes fields' labels point at them
         try:
             robot = app.robot()  # waits for the shared meshes on the first tab
             self.robot_note = robot.fallback_reason or ""
