@@ -290,7 +290,7 @@ def _dtw_backtrack(p: npt.NDArray[np.float64], g: npt.NDArray[np.float64], direc
     path_j: list[int] = []
     path_len = np.empty(B, np.int64)
     for b in range(B):
-        codes = memoryview(np.ascontiguousarray(direction[b])).cast("B")  # codes[i * G + j]
+        codes = memoryview(direction[b]).cast("B")  # codes[i * G + j]: _dtw_block made it C-ordered
         i, j = T - 1, G - 1
         start = len(path_i)
         while True:

@@ -157,6 +157,18 @@ def test_dtw_matches_textbook_dynamic_programming(seed):
     np.testing.assert_allclose(ours_drift, drift, rtol=1e-5)
 
 
+@pytest.mark.parametrize("T, G", [(1, 1), (1, 9), (9, 1), (2, 9), (9, 2)])
+def test_dtw_paths_along_the_tables_edges_match_the_textbook(T, G):
+    """One-step predictions or one-frame episodes: the path runs along the table's first row or
+    column, where only one move stays inside it."""
+    rng = np.random.default_rng(T * 10 + G)
+    pred, gt = rng.normal(size=(T, 6)).cumsum(axis=0), rng.normal(size=(G, 6)).cumsum(axis=0)
+    total, length, drift = _reference_dtw(pred, gt)
+    ours_drift, ours_cost = metrics.dtw(pred, gt)
+    assert ours_cost == pytest.approx(total / length, rel=1e-5)
+    np.testing.assert_allclose(ours_drift, drift, rtol=1e-5)
+
+
 def test_dtw_batched_equals_single():
     gt = _smooth_path(80)
     preds = np.stack([gt + 1.0, gt[::-1], gt * 1.1])
