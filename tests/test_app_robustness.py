@@ -483,10 +483,18 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def start_cli_serve(session: Path, *extra: str) -> tuple[subprocess.Popen, list[str], threading.Thread]:
+def _ctrl_c_as_at_a_terminal() -> None:
+    """In the child before exec: SIGINT at its default. A shell that runs the tests as a background
+    job hands its children SIGINT ignored, and Python then never turns it into KeyboardInterrupt."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def start_cli_serve(session: Path, *extra: str, env: dict[str, str] | None = None,
+                    ) -> tuple[subprocess.Popen, list[str], threading.Thread]:
     proc = subprocess.Popen(
         [sys.executable, "-m", "inspector", "serve", str(session), "--port", str(free_port()), *extra],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, preexec_fn=_ctrl_c_as_at_a_terminal,
+        env=dict(os.environ, PYTHONUNBUFFERED="1", **(env or {})))
     lines: list[str] = []
     reader = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)
     reader.start()
@@ -502,13 +510,13 @@ def served_port(proc, lines) -> int:
     return wait_until(port, timeout=180, what="inspector serve to start")
 
 
-def stop_cli(proc, reader) -> None:
-    """Ctrl-C, as a user stops ``inspector serve``: the app stops and the process exits at once,
-    without waiting for its background decoding (a busy machine may still take a while to run
-    even that: the deadline is generous, and a process that misses it is killed, failing the
-    test's exit-code check)."""
+def stop_cli(proc, reader, how: signal.Signals = signal.SIGINT) -> None:
+    """Ctrl-C (or ``kill``'s SIGTERM), as a user stops ``inspector serve``: the app stops and the
+    process exits at once, without waiting for its background decoding (a busy machine may still
+    take a while to run even that: the deadline is generous, and a process that misses it is
+    killed, failing the test's exit-code check)."""
     if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(how)
         try:
             proc.wait(timeout=120)
         except subprocess.TimeoutExpired:
@@ -542,6 +550,22 @@ def test_serve_binds_loopback_unless_host_is_given(sessions):  # noqa: F811
         assert "share URL" not in "".join(lines), "".join(lines)
     assert default.returncode in (0, 130) and exposed.returncode in (0, 130)
     assert not listening(port=port) and not listening(port=port2)
+
+
+def test_sigterm_stops_serve_and_removes_imported_sessions(dreamzero_dir, tmp_path):
+    """``kill`` / ``docker stop`` stop the server as Ctrl-C does: exit status 0, and the temporary
+    session a raw model output was imported into is gone from the temp folder."""
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    proc, lines, reader = start_cli_serve(dreamzero_dir / "demo", env={"TMPDIR": str(temp)})
+    try:
+        served_port(proc, lines)
+        imported = [p.name for p in temp.iterdir()]
+        assert any(name.startswith("inspector-session-") for name in imported), (imported, "".join(lines))
+    finally:
+        stop_cli(proc, reader, how=signal.SIGTERM)
+    assert proc.returncode == 0, "".join(lines)
+    assert [p.name for p in temp.iterdir()] == [], "".join(lines)
 
 
 def test_share_url_only_on_share(sessions, monkeypatch):  # noqa: F811

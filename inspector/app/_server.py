@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import sys
 import threading
 import time
@@ -176,6 +177,7 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
             app.stop()
             raise
         return app
+    restore_sigterm = _stop_on_sigterm()
     try:
         _announce(app, share)
         while True:
@@ -184,11 +186,27 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
         pass
     finally:
         app.stop()
+        restore_sigterm()
     if exit_when_stopped:
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(0)  # the app and its temporary sessions are gone: nothing is left to clean up
     return app
+
+
+def _stop_on_sigterm():
+    """Make SIGTERM (``kill``, ``docker stop``, systemd) stop the app as Ctrl-C does, so imported
+    sessions' temporary directories go with it rather than staying behind in the temp folder.
+    Returns what puts the previous handler back. Signal handlers belong to the main thread: a
+    server blocking in another thread leaves SIGTERM as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    return lambda: signal.signal(signal.SIGTERM, previous)
 
 
 def _announce(app: InspectorApp, share: bool) -> None:
