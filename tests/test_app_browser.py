@@ -323,12 +323,6 @@ def test_single_chunk_rollout_shows_the_step_slider_only(browser, app):
     page.close()
 
 
-def _field_beside(page, label: str):
-    """The input in the same GUI row as the label ``label`` (see the xfail test below)."""
-    return page.locator("label", has_text=re.compile(f"^{re.escape(label)}$")).first.locator(
-        "xpath=ancestor::div[.//input][1]").locator("input").first
-
-
 def test_notes_are_saved_to_annotations(browser, app):
     """Typing into the notes fields and saving writes the session's annotations.json."""
     import json
@@ -336,8 +330,8 @@ def test_notes_are_saved_to_annotations(browser, app):
     page, tab = new_page(browser, app)
     open_in_page(page, tab, app, "ep000_train")
     page.get_by_text("Notes", exact=True).first.click()  # the folder starts closed
-    _field_beside(page, "Rollout note").fill("grasp slips at chunk 12")
-    _field_beside(page, "Chunk note").fill("cube out of view")
+    page.get_by_label("Rollout note", exact=True).fill("grasp slips at chunk 12")  # fields found by label
+    page.get_by_label("Chunk note", exact=True).fill("cube out of view")
     page.get_by_role("button", name="Save notes").click()
     annotations = tab.loaded.entry.session.root / "annotations.json"
 
@@ -352,13 +346,25 @@ def test_notes_are_saved_to_annotations(browser, app):
     page.close()
 
 
-@pytest.mark.xfail(strict=True, reason="viser 1.1.1's text input gets no id, so its label's for= "
-                                       "points nowhere; passes (and must be un-marked) once viser sets it")
 def test_notes_fields_are_labelled_for_assistive_tech(browser, app):
+    """Each notes field carries the id its label points to (viser's text inputs have none of
+    their own), and keeps it while typed into and after its folder is closed and opened again."""
     page, tab = new_page(browser, app)
-    page.get_by_text("Notes", exact=True).first.click()
-    label = page.locator("label", has_text=re.compile(r"^Rollout note$")).first
-    label.wait_for(state="visible")
-    target = label.get_attribute("for")
-    assert page.locator(f"[id='{target}']").count() == 1
+    folder = page.get_by_text("Notes", exact=True).first
+    folder.click()
+    for name in ("Rollout note", "Chunk note", "Flag rollout"):
+        label = page.locator("label", has_text=re.compile(f"^{name}$")).first
+        label.wait_for(state="visible")
+        target = label.get_attribute("for")
+        field = page.locator(f"[id='{target}']")
+        wait_until(lambda: field.count() == 1, what=f"the field {name!r} labels")
+        assert field.evaluate("el => el.tagName") == "INPUT"
+    note = page.get_by_label("Rollout note", exact=True)
+    note.fill("typed")
+    assert note.input_value() == "typed"
+    folder.click()  # closed and open again: the fields are rendered anew
+    folder.click()
+    wait_until(lambda: page.get_by_label("Chunk note", exact=True).count() == 1,
+               what="the chunk note's label to find its field again")
+    assert page.get_by_label("Rollout note", exact=True).count() == 1
     page.close()

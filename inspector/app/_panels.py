@@ -15,6 +15,7 @@ from ..metrics import prompt_divergence
 from ..timeline import RolloutTimeline
 from ..units import JOINT_NAMES
 from ._cards import unit
+from ._label_ids import LABEL_IDS_HTML
 from ._plots import CursorPlot, Line
 
 SPEEDS = ("0.25x", "0.5x", "1x", "2x", "4x")
@@ -34,7 +35,7 @@ class ControlPanel:
         options = list(self.option_to_key) or ["(no rollouts)"]
         # data-inspector-client lets a test find the server-side tab of a page.
         gui.add_html(f"<div data-inspector-client='{int(client_id)}' style='font-weight:600;"
-                     "font-size:0.95rem;padding:0 0.2rem'>SO-101 rollout inspector</div>")
+                     f"font-size:0.95rem;padding:0 0.2rem'>SO-101 rollout inspector{LABEL_IDS_HTML}</div>")
         # the whole evaluation in one table (see ._overview, which wires it)
         self.show_overview = gui.add_button("Overview", icon="table", hint="Every served rollout in one table")
         self.picker = gui.add_dropdown("Rollout", options, initial_value=options[0])
@@ -54,8 +55,7 @@ class ControlPanel:
             self.compare = gui.add_dropdown("Compare with", [NO_COMPARE, *keys], initial_value=NO_COMPARE)
             self.compare_info = gui.add_html("")
         with gui.add_folder("Notes", expand_by_default=False):
-            # Single-line fields fit the panel. (viser 1.1.1 gives text inputs no id, so their
-            # labels point nowhere for assistive tech; a test marks that as a known failure.)
+            # Single-line fields fit the panel; ._label_ids ties their labels to them.
             self.flag_rollout = gui.add_checkbox("Flag rollout", False)
             self.note_rollout = gui.add_text("Rollout note", "")
             self.flag_chunk = gui.add_checkbox("Flag this chunk", False)
