@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 from pathlib import Path
 
@@ -46,6 +47,18 @@ def imported_session(dreamzero_dir: Path, tmp_path_factory: pytest.TempPathFacto
     dest = tmp_path_factory.mktemp("imported") / "dz"
     import_dreamzero(dreamzero_dir, dest, log=lambda _: None)
     return dest
+
+
+@pytest.fixture(autouse=True)
+def _close_pages_left_open(request: pytest.FixtureRequest):
+    """Close the pages a test left open in its module's ``browser``: one that fails midway skips
+    its own ``page.close()``, and its page keeps drawing software WebGL at full CPU, starving the
+    rerun and the tests after it."""
+    yield
+    browser = getattr(request.node, "funcargs", {}).get("browser")  # only one that was set up
+    for context in list(browser.contexts) if browser is not None else []:
+        with contextlib.suppress(Exception):  # already closed, or the browser is gone
+            context.close()
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
