@@ -73,8 +73,6 @@ class Measured:
 
 def run_process(args: Sequence[str], env: dict[str, str] | None = None, timeout: float = 1800) -> Measured:
     """Run a command to its end: wall time and the peak summed RSS of its process tree."""
-    import psutil
-
     # Output goes to files: a pipe nobody reads while the command runs would block a command that
     # writes more than the pipe holds (a report's JSON), and it would never end.
     with tempfile.TemporaryFile("w+") as out_file, tempfile.TemporaryFile("w+") as err_file:

@@ -335,6 +335,21 @@ def test_single_chunk_rollout_shows_the_step_slider_only(browser, app):
     page.close()
 
 
+def test_a_page_without_a_gpu_ticks_light_3d(browser, app):
+    """Headless Chromium draws WebGL in software (SwiftShader): the page ticks "Light 3D" by itself
+    and the server turns that page's environment map off; a user who unticks it keeps it so."""
+    page, tab = new_page(browser, app)
+    wait_until(lambda: tab.controls.light_3d.value is True, what="the page to tick Light 3D")
+    label = page.locator("label", has_text=re.compile(r"^Light 3D$")).first
+    box = page.locator(f"[id='{label.get_attribute('for')}']")
+    assert box.is_checked()
+    box.click()  # the user unticks it
+    wait_until(lambda: tab.controls.light_3d.value is False, what="Light 3D unticked on the server")
+    page.wait_for_timeout(2000)  # the page's script looks every 0.5 s; it ticks once per connection
+    assert tab.controls.light_3d.value is False and not box.is_checked()
+    page.close()
+
+
 def test_notes_are_saved_to_annotations(browser, app):
     """Typing into the notes fields and saving writes the session's annotations.json."""
     import json

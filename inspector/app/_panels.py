@@ -16,6 +16,7 @@ from ..timeline import RolloutTimeline
 from ..units import JOINT_NAMES
 from ._cards import unit
 from ._label_ids import LABEL_IDS_HTML
+from ._light_3d import LIGHT_3D_HINT, LIGHT_3D_HTML, LIGHT_3D_LABEL
 from ._plots import CursorPlot, Line
 
 SPEEDS = ("0.25x", "0.5x", "1x", "2x", "4x")
@@ -35,7 +36,7 @@ class ControlPanel:
         options = list(self.option_to_key) or ["(no rollouts)"]
         # data-inspector-client lets a test find the server-side tab of a page.
         gui.add_html(f"<div data-inspector-client='{int(client_id)}' style='font-weight:600;"
-                     f"font-size:0.95rem;padding:0 0.2rem'>SO-101 rollout inspector{LABEL_IDS_HTML}</div>")
+                     f"font-size:0.95rem;padding:0 0.2rem'>SO-101 rollout inspector{LABEL_IDS_HTML}{LIGHT_3D_HTML}</div>")
         # the whole evaluation in one table (see ._overview, which wires it)
         self.show_overview = gui.add_button("Overview", icon="table", hint="Every served rollout in one table")
         self.picker = gui.add_dropdown("Rollout", options, initial_value=options[0])
@@ -64,6 +65,8 @@ class ControlPanel:
             self.notes_info = gui.add_html("")
         self.export = gui.add_button("Export .rrd", icon="download",
                                      hint="Download a Rerun recording of this rollout")
+        # outside any folder: the page's script finds it only while it is shown (see ._light_3d)
+        self.light_3d = gui.add_checkbox(LIGHT_3D_LABEL, False, hint=LIGHT_3D_HINT)
 
     def key_of(self, option: str) -> str | None:
         return self.option_to_key.get(option)

@@ -37,6 +37,7 @@ from ._annotations import rollout_annotations, update_annotation
 from ._cards import error_card, esc, headline_metrics, rollout_card, unit, video_grid
 from ._catalog import Loaded
 from ._frames import FramePair
+from ._light_3d import apply_light_3d
 from ._overview import OverviewPanel
 from ._panels import NO_COMPARE, ControlPanel, PlotPanel, VideoPanel
 from ._playback_clip import CLIP_STEPS, encode_clip
@@ -664,6 +665,7 @@ class TabState:
         c.compare.on_update(user(lambda e: self.set_compare(None if e.target.value == NO_COMPARE else e.target.value)))
         c.save_notes.on_click(user(lambda e: self.save_notes()))
         c.export.on_click(user(lambda e: self.export()))
+        c.light_3d.on_update(user(lambda e: apply_light_3d(self.client, bool(e.target.value))))
         self.plots.joint.on_update(user(lambda e: self._show_joint(e.target.value)))
         # Step keys (ignored while typing in a text field).
         for label, key, action in (
