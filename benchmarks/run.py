@@ -90,22 +90,32 @@ def run_process(args: Sequence[str], env: dict[str, str] | None = None, timeout:
 
 
 def _sample_peak_rss(proc: subprocess.Popen, done: Callable[[], bool], timeout: float) -> int:
+    """Peak summed RSS of ``proc`` and its descendants, sampled every 20 ms until ``done()``.
+
+    Finding the descendants scans every process of the machine (~2 ms of CPU), so the tree is
+    looked up every 0.25 s and only its members' RSS read in between: the sampler stays well
+    under 1% of a core instead of taking a tenth of one from the command it measures.
+    """
     import psutil
 
     root = psutil.Process(proc.pid)
+    tree: list[psutil.Process] = [root]
     peak = 0
     deadline = time.monotonic() + timeout
+    next_lookup = 0.0
     while not done():
-        if time.monotonic() > deadline:
+        now = time.monotonic()
+        if now > deadline:
             proc.kill()
             raise TimeoutError(f"pid {proc.pid} still running after {timeout} s")
+        if now >= next_lookup:
+            with contextlib.suppress(psutil.Error):
+                tree = [root, *root.children(recursive=True)]
+            next_lookup = now + 0.25
         total = 0
-        try:
-            for p in [root, *root.children(recursive=True)]:
-                with contextlib.suppress(psutil.Error):
-                    total += p.memory_info().rss
-        except psutil.Error:
-            pass
+        for p in tree:
+            with contextlib.suppress(psutil.Error):
+                total += p.memory_info().rss
         peak = max(peak, total)
         time.sleep(0.02)
     return peak
