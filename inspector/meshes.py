@@ -128,7 +128,7 @@ def _load(src: Path) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]:
         mesh = trimesh.load(str(src), force="mesh")
         return np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
     corners = np.frombuffer(data, _STL_TRIANGLE, count, _STL_HEADER)["vertices"].reshape(-1, 3)
-    return _merge_identical(np.ascontiguousarray(corners))
+    return _merge_identical(corners + np.float32(0.0))  # a copy, with -0.0 made +0.0 (same bits)
 
 
 def _merge_identical(corners: npt.NDArray[np.float32]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]:

@@ -495,6 +495,11 @@ def test_binary_stl_is_read_and_written_as_trimesh_does(tmp_path):
     (tmp_path / "ascii.stl").write_text(trimesh.Trimesh(vertices[:3], [[0, 1, 2]]).export(file_type="stl_ascii"))
     v, f = meshes._load(tmp_path / "ascii.stl")  # not binary: trimesh reads it
     np.testing.assert_allclose(v[f[0]], vertices[:3], atol=1e-6)
+    two = np.zeros(2, meshes._STL_TRIANGLE)  # sharing an edge, one of its ends written as -0.0
+    two["vertices"] = [[[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[-0.0, 0, 0], [0, 1, 0], [1, 1, 0]]]
+    (tmp_path / "two.stl").write_bytes(bytes(80) + (2).to_bytes(4, "little") + two.tobytes())
+    v, f = meshes._load(tmp_path / "two.stl")
+    assert len(v) == 4 and f[0, 0] == f[1, 0] and f[0, 2] == f[1, 1]
 
 
 def test_cluster_vertices_keeps_winding():
