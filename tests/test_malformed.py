@@ -1122,3 +1122,21 @@ def test_importer_property_all_or_nothing(meta: bytes) -> None:
         session = open_session(dest)
         assert list(session.rollouts) == ["f003"] and not session.errors
         assert sorted(p.name for p in out.iterdir()) == ["s"]
+
+
+@pytest.mark.parametrize("value", [10 ** 400, [[10 ** 400] * 6] * 24])
+@pytest.mark.parametrize("key", ["actions_pred", "actions_gt"])
+def test_importer_refuses_numbers_past_float64(tmp_path, key, value):
+    """JSON integers have no limit; one past float64's range is a one-line error naming the field
+    (found by the property test above: an OverflowError escaped)."""
+    from inspector.importers.dreamzero_so101 import import_dreamzero
+
+    meta = {"tag": "x", "episode": 0, "frame_in_ep": 3, "prompt": "p", "episode_length": 30,
+            "predicted_frames": 9, "actions_pred": [[1.0] * 6] * 24, "actions_gt": [[2.0] * 6] * 24, key: value}
+    src = tmp_path / "src" / "f003"
+    src.mkdir(parents=True)
+    (src / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(InspectorError) as caught:
+        import_dreamzero(src, tmp_path / "out", log=lambda _: None)
+    assert key in str(caught.value) and str(src) in str(caught.value) and "\n" not in str(caught.value)
+    assert not (tmp_path / "out").exists()

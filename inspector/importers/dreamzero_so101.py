@@ -293,6 +293,8 @@ def _matrix_field(meta: dict[str, Any], key: str, path: Path) -> np.ndarray:
         arr = np.asarray(meta[key], dtype=np.float64)
     except (TypeError, ValueError):
         raise InspectorError(path, f"{key}: expected a (horizon, 6) list of numbers") from None
+    except OverflowError:  # an integer past float64's range (JSON integers have no limit)
+        raise InspectorError(path, f"{key}: a number too large for a 64-bit float") from None
     require(arr.ndim == 2 and arr.shape[1] == len(JOINT_NAMES) and arr.shape[0] >= 1, path,
             f"{key}: expected shape (horizon, {len(JOINT_NAMES)}), found {arr.shape}")
     check_values(arr, path, f"{key}: ")
