@@ -260,22 +260,26 @@ class ForwardReader:
         self._on_frame = on_frame
         self._first_size: Size | None = None
         self._current: tuple[int, Any] | None = None  # (index, decoded frame) at or before the target
-        self._ahead: tuple[int, Any] | None = None
+        self._ahead: tuple[int, Any, npt.NDArray[np.uint8] | None] | None = None
         self._done = False
         self._rgb: dict[Size | None, npt.NDArray[np.uint8]] = {}
 
-    def _pull(self) -> tuple[int, Any] | None:
+    def _pull(self) -> tuple[int, Any, npt.NDArray[np.uint8] | None] | None:
+        """The next (index, decoded frame, its RGB at the first size if ``on_frame`` made it)."""
         if self._ahead is not None:
             item, self._ahead = self._ahead, None
             return item
         if self._done:
             return None
-        item = next(self._frames, None)
-        if item is None:
+        decoded = next(self._frames, None)
+        if decoded is None:
             self._done = True
-        elif self._on_frame is not None:
-            self._on_frame(item[0], self._to_rgb(item[1], self._first_size))
-        return item
+            return None
+        rgb = None
+        if self._on_frame is not None:
+            rgb = self._to_rgb(decoded[1], self._first_size)
+            self._on_frame(decoded[0], rgb)
+        return (*decoded, rgb)
 
     def frame_at(self, index: int, size: Size | None = None) -> npt.NDArray[np.uint8] | None:
         """(H, W, 3) frame shown at ``index``, at ``size`` (width, height), or None past the clip."""
@@ -288,7 +292,8 @@ class ForwardReader:
             if item[0] > index and self._current is not None:
                 self._ahead = item
                 break
-            self._current, self._rgb = item, {}
+            # the frame on_frame saw is the one asked for, mostly: scaled once, not twice
+            self._current, self._rgb = item[:2], ({self._first_size: item[2]} if item[2] is not None else {})
         if self._current is None or (self._done and index - self._current[0] > self.END_SLACK):
             return None
         if size not in self._rgb:

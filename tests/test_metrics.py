@@ -55,6 +55,28 @@ def test_video_psnr_front_f084_matches_meta(imported_session):
     assert psnr == pytest.approx(r.extra["reference_metrics"]["video_psnr_db"], abs=0.3)
 
 
+def test_frames_shown_while_comparing_do_not_change_the_psnr(imported_session):
+    """The app compares a view while it caches the frames it shows (``on_imagined``/``on_gt``),
+    reusing the GT frame scaled for display: the PSNR is the one computed without them, and
+    each GT frame shown is the clip's frame scaled to the imagined size."""
+    from inspector.video_metrics import compare_clips
+
+    tl = build_timeline(open_session(imported_session).rollouts["ep000_train"])
+    imagined, gt = tl.rollout.video("front"), tl.gt.clips["front"]
+    size = imagined.info().width, imagined.info().height
+    assert (gt.info().width, gt.info().height) != size  # the GT is scaled: the costly path
+    shown_gt: dict[int, np.ndarray] = {}
+    with_frames = compare_clips("front", [imagined], gt, tl.gt_index_of_frame("front"),
+                                on_imagined=lambda b, f, rgb: None,
+                                on_gt=lambda i, rgb: shown_gt.setdefault(i, rgb.copy()))[0]
+    alone = compare_clips("front", [imagined], gt, tl.gt_index_of_frame("front"))[0]
+    np.testing.assert_array_equal(with_frames.psnr_db, alone.psnr_db)
+    assert np.isfinite(alone.psnr_db).sum() > 100
+    for i, rgb in gt.iter_frames(size):
+        if i in (0, 150, len(shown_gt) - 1):
+            np.testing.assert_array_equal(shown_gt[i], rgb)
+
+
 def test_mosaic_sample_front_psnr_and_the_sources_figure(imported_session):
     """``demo/train_ep0``: ``gt_future.mp4`` is the front camera alone, so the front view has GT
     (PSNR ~18 dB, not the 4.5-10 dB of a GT cut as a mosaic) and top / gripper have none. The
