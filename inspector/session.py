@@ -460,9 +460,14 @@ def _read_npy_header(path: Path, shape: tuple[int | str, ...]) -> tuple[int, ...
     if not path.is_file():
         raise InspectorError(path, "file not found")
     try:
-        mapped = np.load(path, mmap_mode="r", allow_pickle=False)  # reads the header, maps the rest
+        # reads the header, maps the rest; a header whose shape overflows the size fails here
+        # (numpy would only warn and go on)
+        with np.errstate(over="raise"):
+            mapped = np.load(path, mmap_mode="r", allow_pickle=False)
         found, dtype = mapped.shape, mapped.dtype
         del mapped
+    except FloatingPointError:
+        raise InspectorError(path, "the shape in its header is too large for any array") from None
     except Exception as exc:
         raise InspectorError(path, f"not a readable .npy array ({type(exc).__name__}: {exc})") from None
     require(dtype.kind in "fiu", path, f"expected a numeric array, found dtype {dtype}")

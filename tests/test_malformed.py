@@ -1140,3 +1140,20 @@ def test_importer_refuses_numbers_past_float64(tmp_path, key, value):
         import_dreamzero(src, tmp_path / "out", log=lambda _: None)
     assert key in str(caught.value) and str(src) in str(caught.value) and "\n" not in str(caught.value)
     assert not (tmp_path / "out").exists()
+
+
+def test_npy_header_whose_size_overflows_is_an_error_not_a_warning(tmp_path):
+    """A header of shape (2**62, 2**62): the size overflows int64. The header check refuses it in
+    one line; numpy alone would warn ("overflow encountered") and go on."""
+    import warnings
+
+    from inspector.session import NpyFile
+
+    path = tmp_path / "actions.npy"
+    path.write_bytes(npy_bytes("<f8", (2 ** 62, 2 ** 62), b"", False))
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        with pytest.raises(InspectorError) as caught:
+            NpyFile(path, ("n", "m"))
+    assert str(path) in str(caught.value) and "too large" in str(caught.value) and "\n" not in str(caught.value)
+    assert [str(w.message) for w in seen] == []
