@@ -7,20 +7,16 @@ below once; it gives such a field the id its label points to, and again whenever
 re-rendered (a folder opened, a control shown again). React leaves an id it did not change alone,
 so typing into the field keeps it.
 
-The script rides in the panel's title HTML as an image's ``onerror`` (an empty data URL fails at
-once), so it arrives with the GUI: viser applies a batch of GUI messages at once, but holds a
-batch that carries anything else until the 3D canvas draws a frame, seconds in software WebGL.
+The script rides in the panel's title HTML (see ``._page_script``).
 """
 
 from __future__ import annotations
 
-from html import escape
+from ._page_script import page_script_html
 
 # A field is looked for only within a few levels above its label (label < p < div < the control's
 # row), and only one without a label of its own, so a label never claims another control's field.
 LABEL_IDS_JS = r"""
-if (window.__inspectorLabelIds) return;
-window.__inspectorLabelIds = true;
 const FIELDS = 'input:not([type]), input[type=text], textarea';
 const labelled = (el) => el.id && document.querySelector(`label[for="${CSS.escape(el.id)}"]`);
 const link = () => {
@@ -42,6 +38,4 @@ new MutationObserver(() => {
 link();
 """
 
-
-# The element that runs the script once, placed in an HTML control that is never re-rendered.
-LABEL_IDS_HTML = f'<img src="data:," alt="" hidden onerror="{escape(LABEL_IDS_JS, quote=True)}">'
+LABEL_IDS_HTML = page_script_html("label_ids", LABEL_IDS_JS)

@@ -6,13 +6,14 @@ nothing: slider keys reached the server after ~2 s instead of ~70 ms. Each page 
 WebGL renderer once and, when it is a software one, ticks the panel's "Light 3D" box (the user can
 untick it); the server then turns that page's environment map off.
 
-The script rides in the panel title's HTML, as ``._label_ids``'s does (and for the same reason).
+The script rides in the panel title's HTML (see ``._page_script``).
 """
 
 from __future__ import annotations
 
 import json
-from html import escape
+
+from ._page_script import page_script_html
 
 LIGHT_3D_LABEL = "Light 3D"
 LIGHT_3D_HINT = ("Plain lighting, no environment map: the 3D view draws several times quicker in a "
@@ -23,8 +24,6 @@ DEFAULT_HDRI = "city"
 # Ticks the box once per connection (a reconnect is a new client, its box unticked): a user who
 # unticks it keeps it so.
 SOFTWARE_GL_JS = r"""
-if (window.__inspectorLight3d) return;
-window.__inspectorLight3d = true;
 let renderer = '';
 try {
   const gl = document.createElement('canvas').getContext('webgl');
@@ -46,7 +45,7 @@ setInterval(() => {
 }, 500);
 """.replace("__LABEL__", json.dumps(LIGHT_3D_LABEL))
 
-LIGHT_3D_HTML = f'<img src="data:," alt="" hidden onerror="{escape(SOFTWARE_GL_JS, quote=True)}">'
+LIGHT_3D_HTML = page_script_html("light_3d", SOFTWARE_GL_JS)
 
 
 # What lights the arms instead: a sky-to-table hemisphere light costs next to nothing to draw.
@@ -54,9 +53,10 @@ HEMISPHERE_NODE = "/lights/light_3d"
 SKY_RGB, TABLE_RGB, HEMISPHERE_INTENSITY = (255, 255, 255), (150, 140, 125), 1.6
 
 
-def apply_light_3d(client, light: bool) -> None:
-    """Light ``client``'s scene plainly (``light``) or with viser's default environment map."""
+def apply_light_3d(client, light: bool):
+    """Light ``client``'s scene plainly (``light``) or with viser's default environment map;
+    returns the hemisphere light's handle (shown only for plain lighting)."""
     client.scene.configure_environment_map(hdri=None if light else DEFAULT_HDRI)
     # re-adding a node of the same name replaces it
-    client.scene.add_light_hemisphere(HEMISPHERE_NODE, sky_color=SKY_RGB, ground_color=TABLE_RGB,
+    return client.scene.add_light_hemisphere(HEMISPHERE_NODE, sky_color=SKY_RGB, ground_color=TABLE_RGB,
                                       intensity=HEMISPHERE_INTENSITY, position=(0.0, 0.0, 1.0), visible=light)
