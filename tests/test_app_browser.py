@@ -340,13 +340,34 @@ def test_a_page_without_a_gpu_ticks_light_3d(browser, app):
     and the server turns that page's environment map off; a user who unticks it keeps it so."""
     page, tab = new_page(browser, app)
     wait_until(lambda: tab.controls.light_3d.value is True, what="the page to tick Light 3D")
+    wait_until(lambda: tab.hemisphere_light is not None and tab.hemisphere_light.visible,
+               what="the page's scene to get its plain light")
     label = page.locator("label", has_text=re.compile(r"^Light 3D$")).first
     box = page.locator(f"[id='{label.get_attribute('for')}']")
     assert box.is_checked()
     box.click()  # the user unticks it
     wait_until(lambda: tab.controls.light_3d.value is False, what="Light 3D unticked on the server")
+    wait_until(lambda: not tab.hemisphere_light.visible, what="the plain light to go")
     page.wait_for_timeout(2000)  # the page's script looks every 0.5 s; it ticks once per connection
     assert tab.controls.light_3d.value is False and not box.is_checked()
+    page.close()
+
+
+def test_light_3d_ticked_before_the_tab_was_wired_still_lights_the_scene(browser, app, monkeypatch):
+    """On a slow start the page's GUI (and its script) can tick Light 3D before the server has
+    wired the box's callback: the tab applies the box's value once wired."""
+    import inspector.app._state as state
+
+    class SlowScene(state.TabScene):
+        def __init__(self, *args, **kwargs):
+            time.sleep(6)  # the panel is already in the page; its script ticks the box meanwhile
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(state, "TabScene", SlowScene)
+    page, tab = new_page(browser, app)
+    wait_until(lambda: tab.hemisphere_light is not None and tab.hemisphere_light.visible,
+               what="the page's scene to get its plain light")
+    assert tab.controls.light_3d.value is True
     page.close()
 
 

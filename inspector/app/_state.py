@@ -83,6 +83,7 @@ class TabState:
         self.pairs: list[FramePair] = []
         self.compare_pairs: dict[str, FramePair] = {}  # view -> the compared rollout's frames
         self.export_result: str | None = None  # what the last export did (for tests and logs)
+        self.hemisphere_light = None  # Light 3D's light, once the box was first set (see ._light_3d)
         self._play_generation = 0
         self._video_html = ""
         self._clip: _Clip | None = None  # the playback clips the video panel is playing
@@ -665,7 +666,9 @@ class TabState:
         c.compare.on_update(user(lambda e: self.set_compare(None if e.target.value == NO_COMPARE else e.target.value)))
         c.save_notes.on_click(user(lambda e: self.save_notes()))
         c.export.on_click(user(lambda e: self.export()))
-        c.light_3d.on_update(user(lambda e: apply_light_3d(self.client, bool(e.target.value))))
+        c.light_3d.on_update(user(lambda e: self._light_3d(bool(e.target.value))))
+        if c.light_3d.value:  # the page ticked it before the callback was there (a slow start)
+            self._light_3d(True)
         self.plots.joint.on_update(user(lambda e: self._show_joint(e.target.value)))
         # Step keys (ignored while typing in a text field).
         for label, key, action in (
@@ -677,6 +680,9 @@ class TabState:
             ("Worst chunk", "W", self.jump_to_worst_chunk),
         ):
             gui.add_command(label, hotkey=key).on_trigger(user(lambda e, a=action: a()))
+
+    def _light_3d(self, light: bool) -> None:
+        self.hemisphere_light = apply_light_3d(self.client, light)
 
     def _picked(self, option: str) -> None:
         """The picker changed: open that rollout, or put back the open one for a name not served."""
