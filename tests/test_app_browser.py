@@ -371,6 +371,33 @@ def test_light_3d_ticked_before_the_tab_was_wired_still_lights_the_scene(browser
     page.close()
 
 
+def test_the_camera_is_fitted_to_the_canvas_the_page_has(browser, app):
+    """The panels dock after the page first reports its canvas: the view is fitted again to the
+    canvas it ends up with (before, a wide first canvas left the arms filling a narrow one), and
+    again on a resize, but a camera the user has moved stays where the user put it."""
+    import numpy as np
+
+    page, tab = new_page(browser, app)
+    open_in_page(page, tab, app, "ep000_train")
+    camera = tab.client.camera
+
+    def fitted_to_canvas() -> bool:
+        aspect = camera.image_width / camera.image_height
+        return tab.scene.framed_aspect is not None and abs(tab.scene.framed_aspect - aspect) < 0.02 * aspect
+
+    wait_until(fitted_to_canvas, what="the view fitted to the docked canvas")
+    page.set_viewport_size({"width": 1200, "height": 1000})
+    wait_until(lambda: camera.image_width < 400 and fitted_to_canvas(), what="the view fitted after a resize")
+    moved = tuple(np.asarray(camera.position) + [0.3, 0.0, 0.1])  # as if the user orbited away
+    camera.position = moved
+    wait_until(lambda: np.allclose(camera.position, moved, atol=1e-4), what="the page to take the camera")
+    page.set_viewport_size({"width": 1600, "height": 1000})
+    wait_until(lambda: camera.image_width > 400, what="the canvas to grow back")
+    page.wait_for_timeout(2000)
+    np.testing.assert_allclose(camera.position, moved, atol=1e-4)
+    page.close()
+
+
 def test_notes_are_saved_to_annotations(browser, app):
     """Typing into the notes fields and saving writes the session's annotations.json."""
     import json

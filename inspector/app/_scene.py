@@ -149,7 +149,9 @@ class TabScene:
         self._paths: list = []
         self._trail: list = []
         self._frame_when_ready: tuple | None = None
-        self._waiting_for_camera = False
+        self._watching_camera = False
+        # (data, compare, canvas aspect, camera position) of the last framing
+        self._framed: tuple | None = None
         self._trail_chunk: int | None = None
         self.data: RolloutScene | None = None
         self.compare: RolloutScene | None = None
@@ -201,24 +203,42 @@ class TabScene:
             points += [compare.joint_pos.reshape(-1, 3), compare.ee_pred]
         centre, radius = bounding_sphere(np.concatenate(points))
         camera = self._client.camera
+        if not self._watching_camera:
+            self._watching_camera = True
+            camera.on_update(lambda _: self._camera_reported())
         try:
-            fov, aspect = float(camera.fov), float(camera.image_width) / max(float(camera.image_height), 1.0)
+            fov, aspect = float(camera.fov), _aspect(camera)
         except AssertionError:  # the browser has not reported its camera yet: frame once it has
             self._frame_when_ready = (data, compare)
-            if not self._waiting_for_camera:
-                self._waiting_for_camera = True
-                camera.on_update(lambda _: self._frame_pending())
             return
         tan_v = np.tan(fov / 2)
         distance = radius / (0.9 * min(tan_v, tan_v * aspect))
+        position = centre + np.asarray(VIEW_DIRECTION) * distance
         # position first: viser moves the look-at point along with a new position
-        camera.position = tuple(float(v) for v in centre + np.asarray(VIEW_DIRECTION) * distance)
+        camera.position = tuple(float(v) for v in position)
         camera.look_at = tuple(float(v) for v in centre)
+        self._framed = (data, compare, aspect, position)
 
-    def _frame_pending(self) -> None:
+    @property
+    def framed_aspect(self) -> float | None:
+        """Width / height of the canvas the camera was last fitted to (None before the first fit)."""
+        return None if self._framed is None else self._framed[2]
+
+    def _camera_reported(self) -> None:
+        """The browser reported its camera: frame a rollout that waited for it, and frame again
+        when the canvas changed shape under a camera the user has not moved (the panels dock
+        after the first report: a view fitted to that canvas runs off the real one)."""
         pending, self._frame_when_ready = self._frame_when_ready, None
         if pending is not None and pending[0] is self.data:
             self._frame(*pending)
+            return
+        framed, camera = self._framed, self._client.camera
+        if framed is None or framed[0] is not self.data:
+            return
+        aspect = _aspect(camera)
+        untouched = np.linalg.norm(np.asarray(camera.position) - framed[3]) < 1e-4
+        if untouched and abs(aspect - framed[2]) > 0.02 * framed[2]:
+            self._frame(framed[0], framed[1])
 
     # -- the scrub step -----------------------------------------------------------------------
     def set_step(self, step: int, limit_text: list[str] | None = None) -> None:
@@ -274,3 +294,8 @@ class TabScene:
                 "/trail/predicted", _path_segments(pts[e - 1:] if e > 0 else pts), HORIZON_RGB,
                 thickness=1.5, thickness_units="screen"))
         self._trail_chunk = chunk
+
+
+def _aspect(camera) -> float:
+    """Width / height of the canvas a client's camera draws (AssertionError before it reported)."""
+    return float(camera.image_width) / max(float(camera.image_height), 1.0)
