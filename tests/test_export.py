@@ -510,6 +510,30 @@ def test_cluster_vertices_keeps_winding():
     np.testing.assert_allclose(nv[nf[0]], v[:3], atol=1e-4)  # same corners, same winding
 
 
+@pytest.mark.parametrize("span_m", [0.3, 5e3])  # an arm's part; one past 21 bits of 0.5 mm cells
+def test_cluster_vertices_matches_sorting_whole_rows(span_m):
+    """Rows are sorted as one packed key each; the cells, their order and the faces kept are those
+    ``np.unique(axis=0)`` gives, so cached meshes keep their bytes."""
+    rng = np.random.default_rng(3)
+    v = rng.uniform(-span_m, span_m, (3000, 3))
+    v[1000:2000] = v[:1000] + rng.normal(0, 1e-4, (1000, 3))  # neighbours that share a cell
+    f = rng.integers(0, len(v), (5000, 3))
+    f[2500:] = f[:2500, ::-1]  # the same triangles again, reversed: kept once each
+    keys = np.round(v / meshes.CELL_M).astype(np.int64)
+    _, cell_of, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    cell_of = cell_of.reshape(-1)
+    expected_v = np.zeros((len(counts), 3))
+    np.add.at(expected_v, cell_of, v)
+    expected_v /= counts[:, None]
+    nf = cell_of[f]
+    nf = nf[(nf[:, 0] != nf[:, 1]) & (nf[:, 1] != nf[:, 2]) & (nf[:, 0] != nf[:, 2])]
+    _, first = np.unique(np.sort(nf, axis=1), axis=0, return_index=True)
+    got_v, got_f = cluster_vertices(v, f, meshes.CELL_M)
+    np.testing.assert_array_equal(got_v, expected_v)
+    np.testing.assert_array_equal(got_f, nf[np.sort(first)])
+    assert len(got_v) < len(v) and len(got_f) < len(f)
+
+
 def test_progress_bar_and_sizes():
     class Tty:
         def __init__(self):
