@@ -81,7 +81,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
     return export_cli(args.path, args.output, rollout=args.rollout, views=args.views,
                       dataset=args.dataset, use_cache=not args.no_cache, limit_margin_deg=args.limit_margin,
-                      episodes=args.episode, ray=args.ray)
+                      episodes=args.episode, ray=args.ray, jobs=args.jobs)
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -210,6 +210,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a LeRobot dataset's episode to export (repeat for several)")
     p.add_argument("--views", nargs="*", help="camera views to include (default: all)")
     p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
+    p.add_argument("--jobs", "-j", type=_positive_int, default=None,
+                   help="worker processes writing several recordings (default: one per core)")
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the metrics cache")
     _ray_argument(p, "write the recordings")
     _limit_margin_argument(p)

@@ -221,7 +221,8 @@ def cached_video_metrics(tl: RolloutTimeline, cache) -> Iterator[None]:
 def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
                views: Sequence[str] | None = None, dataset: str | Path | None = None,
                use_cache: bool = True, limit_margin_deg: float | None = None,
-               episodes: Sequence[int] | None = None, ray: str | None = None) -> int:
+               episodes: Sequence[int] | None = None, ray: str | None = None,
+               jobs: int | None = None) -> int:
     """``inspector export``: write one recording per rollout (or dataset episode); returns the exit code.
 
     Args:
@@ -236,6 +237,8 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
         limit_margin_deg: joint-limit margin [deg] (default: the usual 2 deg).
         episodes: the dataset episodes to export (``path`` a dataset).
         ray: write the recordings as Ray tasks at this address (see :mod:`inspector.ray_jobs`).
+        jobs: worker processes writing several recordings (default: one per core); one rollout
+            is written in this process.
 
     Bad input prints ``error: <file>: <what>`` to stderr and returns 2; the other rollouts of a
     session are still exported when one of them is broken.
@@ -249,7 +252,8 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
     cache = MetricsCache(enabled=use_cache)
     errors = 0
     try:
-        sources = open_sources([path], dataset=dataset, datasets=True, lazy=ray is not None)  # Ray: workers read arrays
+        # lazy: workers read the arrays of what they write; one rollout's are read when it is
+        sources = open_sources([path], dataset=dataset, datasets=True, lazy=True)
         try:
             if sources.datasets:
                 return _export_episodes(sources.datasets[0], episodes, Path(output), views, margin)
@@ -260,6 +264,12 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
                 from .export_jobs import export_on_ray
 
                 return 2 if export_on_ray(targets, ray, views, margin, use_cache) else 0
+            if len(targets) > 1:
+                from .export_jobs import export_in_processes
+                from .report_jobs import default_jobs
+
+                failed = export_in_processes(targets, jobs or default_jobs(), views, margin, use_cache)
+                return 2 if failed else 0
             for session, tag, dest in targets:
                 if tag in session.errors:
                     _print_error(session.errors[tag])

@@ -13,15 +13,18 @@ from __future__ import annotations
 import math
 import os
 from collections import defaultdict
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any, Callable, Iterator, Sequence, TypeVar
 
 from .errors import InspectorError
 
 # Rollouts per task at most: a task's rollouts are compared against their GT in one pass, one
 # open decoder each.
 MAX_TASK_ROLLOUTS = 32
+
+R = TypeVar("R")
 
 
 @dataclass(frozen=True)
@@ -136,20 +139,68 @@ def run_tasks(tasks: Sequence[Task | EpisodeTask], jobs: int) -> Iterator[list[O
         for task in tasks:
             yield run_task(task)
         return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import as_completed
     from concurrent.futures.process import BrokenProcessPool
 
-    # spawn: a clean interpreter per worker (no inherited threads or locks)
-    with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), initializer=_init_worker,
-                             mp_context=multiprocessing.get_context("spawn")) as pool:
-        futures = {pool.submit(run_task, task): task for task in tasks}
+    with local_pool(min(jobs, len(tasks))) as pool:
+        futures = {pool.submit(interruptible, run_task, task): task for task in tasks}
         for future in as_completed(futures):
             task = futures[future]
             try:
                 yield future.result()
             except BrokenProcessPool as exc:  # a worker died (killed, out of memory, a crash)
                 yield worker_died(task, str(exc))
+
+
+@contextmanager
+def local_pool(workers: int) -> Iterator[Any]:
+    """A pool of ``workers`` spawned processes for :func:`interruptible` jobs that stops promptly.
+
+    Ctrl-C reaches every process of the terminal's group. The driver handles it: no job starts
+    after it (not even one already queued to a worker), the jobs under way are stopped by it, and
+    the pool is shut down. Between jobs a worker ignores it; it would otherwise die printing a
+    traceback.
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    context = multiprocessing.get_context("spawn")  # a clean interpreter per worker (no inherited locks)
+    stop = context.Event()
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_local_worker,
+                               initargs=(stop,))
+    try:
+        yield pool
+    except BaseException:
+        stop.set()
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+_STOP: Any = None  # a local pool's stop event, in its workers
+
+
+def _init_local_worker(stop: Any) -> None:
+    global _STOP
+    import signal
+
+    _init_worker()
+    _STOP = stop
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def interruptible(fn: Callable[[Any], R], job: Any) -> R:
+    """``fn(job)`` in a :func:`local_pool` worker, stopped by Ctrl-C (a KeyboardInterrupt the pool
+    hands back to the driver, which is stopping too); not started once the driver stops."""
+    import signal
+
+    if _STOP is not None and _STOP.is_set():
+        raise KeyboardInterrupt
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        return fn(job)
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _init_worker() -> None:

@@ -564,12 +564,12 @@ def test_progress_bar_and_sizes():
 
 def test_cli_exports_one_file_per_rollout(synthetic_session, tmp_path, capsys):
     out = tmp_path / "out"
-    assert cli_main(["export", str(synthetic_session), "-o", str(out)]) == 0
+    assert cli_main(["export", str(synthetic_session), "-o", str(out), "--jobs", "2"]) == 0
     files = sorted(p.name for p in out.iterdir())
     assert files == ["short.rrd", "slow.rrd"]
-    printed = capsys.readouterr().out
+    printed = capsys.readouterr().out.splitlines()
+    assert [line.split(" (")[0] for line in printed] == [f"wrote {out / name}" for name in files]  # in order
     for name in files:
-        assert f"wrote {out / name} (" in printed
         rrd_verify(out / name)
 
 
@@ -618,6 +618,51 @@ def test_cli_broken_rollout_spares_the_others(synthetic_session, tmp_path, capsy
     err = capsys.readouterr().err
     assert err.startswith(f"error: {root / 'rollouts' / 'short' / 'actions.npy'}: shape")
     assert [p.name for p in (tmp_path / "out").iterdir()] == ["slow.rrd"]
+
+
+def test_several_rollouts_are_written_by_fresh_worker_processes(synthetic_session, tmp_path, monkeypatch):
+    """rerun's SDK keeps native memory per recording written, so a session is written by worker
+    processes that fresh ones replace every few recordings; outcomes come back in the jobs' order."""
+    from inspector import export_jobs
+    from inspector.export_jobs import ExportJob, run_export_jobs
+
+    monkeypatch.setattr(export_jobs, "EXPORTS_PER_WORKER", 1)
+    jobs = [ExportJob(str(synthetic_session), tag, str(tmp_path / f"{i}_{tag}.rrd"), None, None, 2.0, False)
+            for i in range(2) for tag in ("short", "slow")]
+    outcomes = list(run_export_jobs(jobs, workers=1))
+    assert [(o.tag, o.dest, o.error) for o in outcomes] == [(j.tag, j.dest, None) for j in jobs]
+    pids = [o.worker_pid for o in outcomes]
+    assert len(set(pids)) == len(jobs) and os.getpid() not in pids
+    for o in outcomes:
+        assert Path(o.dest).stat().st_size == o.size
+    rrd_verify(Path(outcomes[-1].dest))
+
+
+def test_ctrl_c_stops_a_session_export_leaving_only_whole_files(tmp_path):
+    """Ctrl-C (SIGINT to the terminal's process group) while workers write: exit 130 soon, no
+    temporary file left, and every recording there is complete."""
+    import signal
+
+    demo = Path(__file__).resolve().parents[1] / "sessions" / "demo"
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "inspector", "export", str(demo), "-o", str(out), "--no-cache"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    try:
+        first = proc.stdout.readline()  # blocks until the first recording is written (or the export ends)
+        assert first.startswith("wrote "), first + proc.stderr.read()
+        os.killpg(proc.pid, signal.SIGINT)
+        rest, err = proc.communicate(timeout=180)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err, err
+    written = sorted(out.iterdir())
+    assert [p for p in written if p.suffix != ".rrd"] == []  # no .partial
+    assert 1 <= len(written) < 12
+    for path in written:
+        rrd_verify(path)
 
 
 def test_cli_entry_point(synthetic_session, tmp_path):

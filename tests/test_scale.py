@@ -317,3 +317,32 @@ def test_prompt_pairs_are_matched_by_tag_and_linear_in_count():
     assert len(pairs) == 5000 + 2  # each novel with its train; green (alone) with one of each
     # a different start frame never pairs
     assert prompt_pairs([(1, ("s", 0, 0), "x_train", "A"), (2, ("s", 0, 10), "x_novel", "B")]) == []
+
+
+def test_ctrl_c_stops_a_report_and_its_workers_at_once(tmp_path):
+    """Ctrl-C (SIGINT to the terminal's process group) while the workers compute: exit 130 with no
+    worker traceback, without waiting for the tasks under way or the ones queued to a worker."""
+    import signal
+
+    import psutil
+
+    proc = subprocess.Popen([sys.executable, "-m", "inspector", "report", str(DEMO), "--json", "--jobs", "2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            env={**os.environ, "INSPECTOR_CACHE_DIR": str(tmp_path / "cache")})
+    try:
+        deadline = time.monotonic() + 120
+        while proc.poll() is None and time.monotonic() < deadline:  # until both workers compute
+            workers = [p for p in psutil.Process(proc.pid).children() if "spawn_main" in " ".join(p.cmdline())]
+            if len(workers) == 2 and all(w.cpu_times().user > 1.0 for w in workers):
+                break
+            time.sleep(0.1)
+        assert proc.poll() is None, "the report ended before its workers computed"
+        os.killpg(proc.pid, signal.SIGINT)
+        stopped = time.monotonic()
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130 and out == "", err
+    assert "Traceback" not in err, err
+    assert time.monotonic() - stopped < 60
