@@ -3,10 +3,13 @@ script (and this project before its scale work) does.
 
     python benchmarks/naive.py report SESSION [-n N]
     python benchmarks/naive.py export SESSION TAG OUT.rrd
+    python benchmarks/naive.py export-all SESSION OUT_DIR
 
 ``report``: every rollout opened up front, one timeline each, every clip decoded whole into
 memory and kept with its rollout, PSNR on the arrays, all of it held until the end.
 ``export``: the clips decoded whole, then one ``rr.log`` of an ``rr.Image`` per frame and view.
+``export-all``: every rollout of a session written by today's exporter, one after another in
+this one process (what ``inspector export SESSION -o DIR`` did before it used worker processes).
 """
 
 from __future__ import annotations
@@ -62,6 +65,18 @@ def naive_export(session_dir: str, tag: str, out: str) -> None:
     rec.disconnect()
 
 
+def one_process_export_all(session_dir: str, out_dir: str) -> None:
+    from pathlib import Path
+
+    from inspector.cache import MetricsCache
+    from inspector.export import export_rollout
+    from inspector.session import open_session
+
+    session = open_session(session_dir)
+    for tag in sorted(session.rollouts):
+        export_rollout(session.rollouts[tag], Path(out_dir) / f"{tag}.rrd", None, 2.0, MetricsCache())
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="what", required=True)
@@ -72,9 +87,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("session")
     p.add_argument("tag")
     p.add_argument("out")
+    p = sub.add_parser("export-all")
+    p.add_argument("session")
+    p.add_argument("out_dir")
     args = parser.parse_args(argv)
     if args.what == "report":
         print(json.dumps(naive_report(args.session, args.n)))
+    elif args.what == "export-all":
+        one_process_export_all(args.session, args.out_dir)
     else:
         naive_export(args.session, args.tag, args.out)
     return 0

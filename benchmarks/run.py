@@ -291,7 +291,8 @@ def _fixture_session(tmp: Path) -> Path:
 
 def bench_export(tmp: Path, quick: bool) -> list[Figure]:
     """The 60-chunk fixture rollout with three views to .rrd, cold (empty caches), vs decoding the
-    clips and logging one image per frame."""
+    clips and logging one image per frame; then a session of rollouts with two views each to a
+    directory, vs the same exporter writing them one after another in one process."""
     session = _fixture_session(tmp)
     out = tmp / "export.rrd"
     runs = [run_process(inspector_cmd("export", session, "--rollout", "ep000_train", "-o", out),
@@ -300,10 +301,18 @@ def bench_export(tmp: Path, quick: bool) -> list[Figure]:
     size_mb = out.stat().st_size / 1e6
     naive = run_process([sys.executable, NAIVE, "export", session, "ep000_train", tmp / "naive.rrd"])
     naive_mb = (tmp / "naive.rrd").stat().st_size / 1e6
+    n = 16 if quick else 64
+    many = _eval_session(tmp, f"video{n}", n, video=True)
+    all_ours = run_process(inspector_cmd("export", many, "-o", tmp / "all"), env=fresh_cache(tmp))
+    all_one = run_process([sys.executable, NAIVE, "export-all", many, tmp / "all_one"], env=fresh_cache(tmp))
     return [Figure("export", ours.wall_s, "s", "< 3 s and < 700 MB",
                    ours.wall_s < 3 and ours.peak_mib < 700, ours.peak_mib, naive.wall_s, naive.peak_mib,
                    "whole process, empty metrics cache"),
-            Figure("export_size", size_mb, "MB", "< 10 MB", size_mb < 10, baseline=naive_mb)]
+            Figure("export_size", size_mb, "MB", "< 10 MB", size_mb < 10, baseline=naive_mb),
+            Figure(f"export_{n}_video", all_ours.wall_s, "s", "< 1 GB, faster than one process",
+                   all_ours.peak_mib < 1024 and all_ours.wall_s < all_one.wall_s, all_ours.peak_mib,
+                   all_one.wall_s, all_one.peak_mib,
+                   "a session to a directory, empty caches; baseline: one process, one rollout after another")]
 
 
 # ----------------------------------------------------------------------------------------------
