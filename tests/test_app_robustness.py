@@ -548,7 +548,8 @@ def test_serve_binds_loopback_unless_host_is_given(sessions):  # noqa: F811
         stop_cli(exposed, exposed_reader)
     for lines in (default_lines, exposed_lines):
         assert "share URL" not in "".join(lines), "".join(lines)
-    assert default.returncode in (0, 130) and exposed.returncode in (0, 130)
+    for proc, lines in ((default, default_lines), (exposed, exposed_lines)):
+        assert proc.returncode in (0, 130), "".join(lines)
     assert not listening(port=port) and not listening(port=port2)
 
 
@@ -566,6 +567,35 @@ def test_sigterm_stops_serve_and_removes_imported_sessions(dreamzero_dir, tmp_pa
         stop_cli(proc, reader, how=signal.SIGTERM)
     assert proc.returncode == 0, "".join(lines)
     assert [p.name for p in temp.iterdir()] == [], "".join(lines)
+
+
+HANGING_STOP = """
+import sys, threading
+import inspector.app._server as server
+from inspector.cli import main
+
+server.STOP_GRACE_S = 3.0
+server.InspectorApp.stop = lambda self: threading.Event().wait()  # a close that never returns
+sys.exit(main(["serve", sys.argv[1], "--port", sys.argv[2]]))
+"""
+
+
+def test_ctrl_c_ends_serve_even_when_the_app_hangs_stopping(sessions):  # noqa: F811
+    """A stop that hangs (a thread holding a tab forever) does not keep ``inspector serve``
+    running after Ctrl-C: it exits after its grace period, printing where every thread was."""
+    proc = subprocess.Popen([sys.executable, "-c", HANGING_STOP, str(sessions[0]), str(free_port())],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            preexec_fn=_ctrl_c_as_at_a_terminal, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)
+    reader.start()
+    try:
+        served_port(proc, lines)
+    finally:
+        stop_cli(proc, reader)
+    out = "".join(lines)
+    assert proc.returncode == 1, out
+    assert "most recent call first" in out and "<lambda>" in out, out  # the stuck thread's stack
 
 
 def test_share_url_only_on_share(sessions, monkeypatch):  # noqa: F811

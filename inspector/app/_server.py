@@ -24,6 +24,8 @@ from ._state import TabState
 # Background frame loaders, one per camera view of an opening rollout (up to four): decoding and
 # JPEG encoding run outside the GIL, so views fill side by side and the cores stay busy.
 DECODE_WORKERS = 4
+# How long ``inspector serve`` waits for the app to stop after Ctrl-C before it exits anyway.
+STOP_GRACE_S = 30.0
 
 
 class InspectorApp:
@@ -181,10 +183,14 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
     try:
         _announce(app, share)
         while True:
-            time.sleep(3600)
+            # Short sleeps: a signal the kernel hands to another thread interrupts no sleep here,
+            # and Python runs its handler only when this thread next wakes.
+            time.sleep(1.0)
     except KeyboardInterrupt:
         pass
     finally:
+        if exit_when_stopped:
+            _exit_if_stopping_hangs(STOP_GRACE_S)
         app.stop()
         restore_sigterm()
     if exit_when_stopped:
@@ -192,6 +198,16 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
         sys.stderr.flush()
         os._exit(0)  # the app and its temporary sessions are gone: nothing is left to clean up
     return app
+
+
+def _exit_if_stopping_hangs(grace_s: float) -> None:
+    """Ctrl-C always ends the command: should stopping the app take over ``grace_s`` (a thread
+    holding a tab, a stuck close), every thread's stack is printed, so the hang can be found, and
+    the process exits (code 1). faulthandler's watchdog is a C thread: it fires even while a
+    thread holds the GIL."""
+    import faulthandler
+
+    faulthandler.dump_traceback_later(grace_s, exit=True, file=sys.stderr)
 
 
 def _stop_on_sigterm():
