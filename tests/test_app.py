@@ -25,6 +25,7 @@ from inspector.app import HeadlessClient, TabState, serve
 from inspector.app._annotations import read_annotations, update_annotation
 from inspector.app._frames import READY
 from inspector.app._playback_clip import CLIP_STEPS
+from inspector.app._state import ARMS_AFTER_FRAME_S
 from inspector.errors import InspectorError
 
 
@@ -114,6 +115,34 @@ def test_worst_chunk_and_limits(app):
         tab.set_step(bad)
         texts = tab._limit_text(bad)
         assert any(texts) and all(("limit" in t) == v for t, v in zip(texts, tl.limit_violation[bad]))
+
+
+def test_a_light_3d_page_gets_a_steps_frames_before_its_arms(app):
+    """A page drawing WebGL in software (Light 3D) is sent a step's frames and readout at once and
+    the arms' pose just after, so it paints the frames before a 3D redraw blocks it; a page with
+    a GPU gets the whole step in one message."""
+    client, tab = connect(app)
+    with client:
+        assert tab.open(key(app, "ep000_train"))
+        ee_pred = tab.scene.data.ee_pred
+
+        def posed_at(step: int) -> bool:
+            return bool(np.allclose(tab.scene._ee_pred.position, ee_pred[step], atol=1e-6))
+
+        with tab.lock:  # nothing else runs on this tab meanwhile
+            tab.set_step(50)
+            assert posed_at(50)  # Light 3D off: all at once
+            tab.controls.light_3d.value = True
+            tab.set_step(60)
+            assert "step 60" in tab.controls.readout.content and "data-step='60'" in tab._video_html
+            assert posed_at(50)  # the arms follow
+        wait_until(lambda: posed_at(60), what="the arms posed at the new step")
+        with tab.lock:  # two quick steps: the arms go to the last one
+            tab.set_step(70)
+            tab.set_step(80)
+        wait_until(lambda: posed_at(80), what="the arms posed at the last step")
+        time.sleep(2 * ARMS_AFTER_FRAME_S)
+        assert posed_at(80)
 
 
 def test_tabs_are_independent(app):

@@ -122,6 +122,52 @@ def test_chunk_slider_moves_server_state_and_video(browser, app):
     page.close()
 
 
+def test_keys_step_the_timeline_without_moving_the_3d_view(browser, app):
+    """viser turns its camera with the arrow keys and W outside text fields; on the Chunk slider
+    the arrows step the chunks, and W is the worst-chunk key: neither also moves the view."""
+    import numpy as np
+
+    page, tab = new_page(browser, app)
+    open_in_page(page, tab, app, "ep000_train")
+
+    def camera():
+        try:
+            return np.asarray(tab.client.camera.position, dtype=float)
+        except AssertionError:  # not reported by the page yet
+            return None
+
+    seen = [None]
+
+    def settled() -> bool:  # the same position 1.5 s apart, a redraw (viser's 1 s heartbeat) between:
+        seen.append(camera())  # the view's fit on open, eased out over the frames drawn, is over
+        return seen[-2] is not None and bool(np.allclose(seen[-1], seen[-2], atol=1e-6))
+
+    wait_until(settled, interval=1.5, what="the view to settle")
+    start = seen[-1]
+
+    def hold(key: str) -> None:  # as a user presses: viser turns the view while a key is down
+        page.keyboard.down(key)
+        page.wait_for_timeout(300)
+        page.keyboard.up(key)
+
+    slider_thumb(page, re.compile(r"^Chunk$")).focus()
+    for _ in range(3):
+        hold("ArrowRight")
+    wait_until(lambda: tab.chunk == 3, what="the arrow keys to step the chunk")
+    hold("w")
+    worst, n = tab.loaded.timeline.worst_chunk()[0], tab.loaded.timeline.n_chunks - 1
+    wait_until(lambda: tab.chunk == worst, what="W to jump to the worst chunk")
+    wait_until(lambda: page.evaluate("(t) => document.body.innerText.includes(t)", f"chunk {worst} / {n}"),
+               what="the page to show the worst chunk")
+    page.wait_for_timeout(1500)  # a turned view is drawn and reported within a heartbeat
+    assert np.allclose(camera(), start, atol=1e-4), (start, camera())
+    # Where no control claims them, viser's keys still turn the view (and the check above could fail).
+    page.locator("body").click(position={"x": 600, "y": 950})
+    hold("ArrowLeft")
+    wait_until(lambda: not np.allclose(camera(), start, atol=1e-4), what="the arrow key to turn the view")
+    page.close()
+
+
 def test_play_button_and_step_keys(browser, app):
     page, tab = new_page(browser, app)
     open_in_page(page, tab, app, "ep000_train")

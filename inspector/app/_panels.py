@@ -15,6 +15,7 @@ from ..metrics import prompt_divergence
 from ..timeline import RolloutTimeline
 from ..units import JOINT_NAMES
 from ._cards import unit
+from ._keys import KEYS_HTML
 from ._label_ids import LABEL_IDS_HTML
 from ._light_3d import LIGHT_3D_HINT, LIGHT_3D_HTML, LIGHT_3D_LABEL
 from ._plots import CursorPlot, Line
@@ -36,7 +37,7 @@ class ControlPanel:
         options = list(self.option_to_key) or ["(no rollouts)"]
         # data-inspector-client lets a test find the server-side tab of a page.
         gui.add_html(f"<div data-inspector-client='{int(client_id)}' style='font-weight:600;"
-                     f"font-size:0.95rem;padding:0 0.2rem'>SO-101 rollout inspector{LABEL_IDS_HTML}{LIGHT_3D_HTML}</div>")
+                     f"font-size:0.95rem;padding:0 0.2rem'>SO-101 rollout inspector{LABEL_IDS_HTML}{LIGHT_3D_HTML}{KEYS_HTML}</div>")
         # the whole evaluation in one table (see ._overview, which wires it)
         self.show_overview = gui.add_button("Overview", icon="table", hint="Every served rollout in one table")
         self.picker = gui.add_dropdown("Rollout", options, initial_value=options[0])

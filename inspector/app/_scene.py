@@ -148,6 +148,7 @@ class TabScene:
         ]
         self._paths: list = []
         self._trail: list = []
+        self._trail_shapes: tuple | None = None  # the trail nodes' array shapes (kept while they fit)
         self._frame_when_ready: tuple | None = None
         self._watching_camera = False
         # (data, compare, canvas aspect, camera position) of the last framing
@@ -271,29 +272,47 @@ class TabScene:
                 sphere.visible = on
 
     def _draw_trail(self, chunk: int) -> None:
-        """Replace the horizon trail by chunk ``chunk``'s (executed part set apart)."""
+        """Show chunk ``chunk``'s horizon trail (executed part set apart).
+
+        The trail's nodes are kept and given the chunk's points: removing and re-adding them
+        made the browser drop and recompile their shaders on every chunk step, the slowest part
+        of a step in a page drawing WebGL without a GPU."""
         data = self.data
         assert data is not None
-        scene = self._client.scene
-        for node in self._trail:
-            node.remove()
         pts = data.trail[chunk]
         e = min(data.executed, len(pts))
         # executed steps: a thick dark line with large dots; the rest of the horizon: thin and light
         colors = np.where(data.trail_violation[chunk][:, None], np.array(LIMIT_RGB),
                           np.where(np.arange(len(pts))[:, None] < e, np.array(EXECUTED_RGB),
                                    np.array(HORIZON_RGB))).astype(np.uint8)
+        executed = _path_segments(pts[:e])
+        horizon = _path_segments(pts[e - 1:] if e > 0 else pts) if e < len(pts) else None
+        shapes = (executed.shape, pts.shape, None if horizon is None else horizon.shape)
+        if self._trail and self._trail_shapes == shapes:
+            self._trail[0].points = executed
+            self._trail[1].points = pts.astype(np.float32)
+            self._trail[1].colors = colors
+            if horizon is not None:
+                self._trail[2].points = horizon
+        else:
+            self._add_trail(executed, pts, colors, horizon)
+            self._trail_shapes = shapes
+        self._trail_chunk = chunk
+
+    def _add_trail(self, executed: np.ndarray, pts: np.ndarray, colors: np.ndarray,
+                   horizon: np.ndarray | None) -> None:
+        scene = self._client.scene
+        for node in self._trail:
+            node.remove()
         self._trail = [
-            scene.add_line_segments("/trail/executed", _path_segments(pts[:e]), EXECUTED_RGB,
-                                    thickness=6.0, thickness_units="screen"),
+            scene.add_line_segments("/trail/executed", executed, EXECUTED_RGB, thickness=6.0,
+                                    thickness_units="screen"),
             scene.add_point_cloud("/trail/points", pts.astype(np.float32), colors=colors,
                                   point_size=0.006, point_shape="circle"),
         ]
-        if e < len(pts):
-            self._trail.append(scene.add_line_segments(
-                "/trail/predicted", _path_segments(pts[e - 1:] if e > 0 else pts), HORIZON_RGB,
-                thickness=1.5, thickness_units="screen"))
-        self._trail_chunk = chunk
+        if horizon is not None:
+            self._trail.append(scene.add_line_segments("/trail/predicted", horizon, HORIZON_RGB,
+                                                       thickness=1.5, thickness_units="screen"))
 
 
 def _aspect(camera) -> float:

@@ -37,6 +37,7 @@ from ._annotations import rollout_annotations, update_annotation
 from ._cards import error_card, esc, headline_metrics, rollout_card, unit, video_grid
 from ._catalog import Loaded
 from ._frames import FramePair
+from ._keys import HOTKEYS
 from ._light_3d import apply_light_3d
 from ._overview import OverviewPanel
 from ._panels import NO_COMPARE, ControlPanel, PlotPanel, VideoPanel
@@ -52,6 +53,13 @@ NOTES_NEED_A_SESSION = ("<div style='font-size:0.75rem;color:#6b7280'>Notes are 
                         "annotations.json; a dataset's episodes have none (the dataset is never written to)."
                         "</div>")
 PLOT_CURSOR_HZ = 10.0
+
+
+# A page drawing WebGL in software (Light 3D ticked) spends ~150 ms on each 3D redraw and shows
+# nothing new meanwhile: a step the user asks for goes out in two messages there, the frames, plot
+# cursors and readout at once and the arms this long after, so the page paints the step's frames
+# before it starts the redraw (a key shows its frame in ~30 ms, not ~230 ms).
+ARMS_AFTER_FRAME_S = 0.05
 
 
 class TabState:
@@ -277,13 +285,29 @@ class TabState:
             if step == self.step and not force:
                 return step
             self.step = step
+            arms_later = not self.playing and bool(self.controls.light_3d.value)
             with self.client.atomic():
-                self.scene.set_step(step, self._limit_text(step))
+                if not arms_later:
+                    self.scene.set_step(step, self._limit_text(step))
                 self._render_video()
                 if cursor:
                     self.plots.set_cursor(float(tl.t_s[step]))
                 self._show_time(source)
+            if arms_later:
+                self.client.flush()
+                timer = threading.Timer(ARMS_AFTER_FRAME_S, self._pose_arms, args=(loaded, step))
+                timer.daemon = True
+                timer.start()
             return step
+
+    def _pose_arms(self, loaded: Loaded, step: int) -> None:
+        """The 3D scene's part of a step shown frame first (see ``ARMS_AFTER_FRAME_S``); a newer
+        step or another rollout poses the arms itself."""
+        with self.lock:
+            if self.closed.is_set() or self.loaded is not loaded or self.step != step:
+                return
+            with self.client.atomic():
+                self.scene.set_step(step, self._limit_text(step))
 
     def set_chunk(self, chunk: int, step_in_chunk: int | None = None, source=None) -> int:
         """Go to ``chunk`` (clamped), keeping the step within the chunk unless one is given."""
@@ -670,16 +694,17 @@ class TabState:
         if c.light_3d.value:  # the page ticked it before the callback was there (a slow start)
             self._light_3d(True)
         self.plots.joint.on_update(user(lambda e: self._show_joint(e.target.value)))
-        # Step keys (ignored while typing in a text field).
-        for label, key, action in (
-            ("Previous step", "J", lambda: self.set_step(self.step - 1)),
-            ("Next step", "L", lambda: self.set_step(self.step + 1)),
-            ("Play / pause", "K", lambda: self.pause() if self.playing else self.play()),
-            ("Previous chunk", "pageup", lambda: self.set_chunk(self.chunk - 1)),
-            ("Next chunk", "pagedown", lambda: self.set_chunk(self.chunk + 1)),
-            ("Worst chunk", "W", self.jump_to_worst_chunk),
-        ):
-            gui.add_command(label, hotkey=key).on_trigger(user(lambda e, a=action: a()))
+        # Step keys (ignored while typing in a text field; kept from viser's camera: see ._keys).
+        actions = {
+            "Previous step": lambda: self.set_step(self.step - 1),
+            "Next step": lambda: self.set_step(self.step + 1),
+            "Play / pause": lambda: self.pause() if self.playing else self.play(),
+            "Previous chunk": lambda: self.set_chunk(self.chunk - 1),
+            "Next chunk": lambda: self.set_chunk(self.chunk + 1),
+            "Worst chunk": self.jump_to_worst_chunk,
+        }
+        for label, key in HOTKEYS.items():
+            gui.add_command(label, hotkey=key).on_trigger(user(lambda e, a=actions[label]: a()))
 
     def _light_3d(self, light: bool) -> None:
         self.hemisphere_light = apply_light_3d(self.client, light)

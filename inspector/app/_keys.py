@@ -1,0 +1,47 @@
+"""The app's keys, and keeping them from also moving the 3D view.
+
+viser 1.1.1 moves its camera while W/A/S/D/Q/E or an arrow key is held anywhere but in a text
+field: its listener sits on the document and knows neither a slider thumb with the focus nor the
+app's own hotkeys. Stepping through the chunks with the arrow keys orbited the 3D view, and W
+(worst chunk) flew the camera away from the arms; in a browser without a GPU every such key also
+started a 3D redraw (~150 ms in software WebGL) before the step's frame could even be asked for.
+
+The slider and the hotkeys handle the key first (React listens on its root element, inside
+``<html>``; Mantine's hotkeys on ``<html>`` itself); the page's script then stops the event at
+``<html>``, before the document. The script rides in the panel title's HTML (see ``._page_script``).
+"""
+
+from __future__ import annotations
+
+import json
+
+from ._page_script import page_script_html
+
+# Command label -> hotkey (Mantine's notation), bound by each tab.
+HOTKEYS = {
+    "Previous step": "J",
+    "Next step": "L",
+    "Play / pause": "K",
+    "Previous chunk": "pageup",
+    "Next chunk": "pagedown",
+    "Worst chunk": "W",
+}
+# Letters viser's keyboard camera moves by.
+CAMERA_LETTERS = frozenset("WASDQE")
+
+_KEYS_JS = r"""
+const CLAIMED = new Set(__CLAIMED__);
+document.documentElement.addEventListener('keydown', (e) => {
+  const onSlider = e.key.startsWith('Arrow') && e.target instanceof Element && e.target.closest('[role="slider"]');
+  const hotkey = CLAIMED.has(e.code) && !e.ctrlKey && !e.metaKey && !e.altKey;
+  if (onSlider || hotkey) e.stopPropagation();
+});
+"""
+
+
+def claimed_camera_codes() -> list[str]:
+    """``KeyboardEvent.code`` of each hotkey that is also one of viser's camera keys."""
+    return sorted(f"Key{k}" for k in HOTKEYS.values() if k.upper() in CAMERA_LETTERS)
+
+
+KEYS_HTML = page_script_html("keys", _KEYS_JS.replace("__CLAIMED__", json.dumps(claimed_camera_codes())))
