@@ -114,7 +114,8 @@ def _unique_rows(rows: npt.NDArray[np.int64], **kwargs: bool) -> tuple[Any, ...]
     """``np.unique(rows, axis=0, **kwargs)``, with the rows packed into one int64 each.
 
     Sorting one int64 per row is several times quicker than numpy's sort of whole rows, and the
-    packed keys order as the rows do, so the results are the same. Rows whose values span more
+    packed keys order as the rows do, so the index, inverse and counts are the same (the unique
+    values come back as packed keys: callers use only the others). Rows whose values span more
     than 21 bits are left to numpy.
     """
     if len(rows) == 0:
