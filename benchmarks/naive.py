@@ -22,9 +22,9 @@ import numpy as np
 
 
 def naive_report(session_dir: str, n: int | None) -> dict:
-    from inspector import metrics
-    from inspector.session import open_session
-    from inspector.timeline import build_timeline
+    from inspector.analysis import metrics
+    from inspector.analysis.timeline import build_timeline
+    from inspector.data.session import open_session
 
     session = open_session(session_dir)  # every rollout's arrays read now
     kept = []
@@ -50,7 +50,7 @@ def naive_report(session_dir: str, n: int | None) -> dict:
 def naive_export(session_dir: str, tag: str, out: str) -> None:
     import rerun as rr
 
-    from inspector.session import open_session
+    from inspector.data.session import open_session
 
     rollout = open_session(session_dir).rollouts[tag]
     clips = {(v, gt): rollout.video(v, gt=gt).decode(max_bytes=2**40)
@@ -69,8 +69,8 @@ def one_process_export_all(session_dir: str, out_dir: str) -> None:
     from pathlib import Path
 
     from inspector.cache import MetricsCache
-    from inspector.export import export_rollout
-    from inspector.session import open_session
+    from inspector.data.session import open_session
+    from inspector.export.recording import export_rollout
 
     session = open_session(session_dir)
     for tag in sorted(session.rollouts):

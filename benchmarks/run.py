@@ -29,9 +29,9 @@ import tempfile
 import threading
 import time
 import uuid
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -150,8 +150,8 @@ def bench_fk(quick: bool) -> list[Figure]:
     ``fk``: the tool point of 1 M configurations (what every metric uses); ``fk_all_links``: every
     link's full pose (what the app and the export draw).
     """
-    from inspector.kinematics import kinematics
-    from inspector.robot import GRIPPER_FRAME, load_urdf
+    from inspector.robot.description import GRIPPER_FRAME, load_urdf
+    from inspector.robot.kinematics import kinematics
     from inspector.units import JOINT_NAMES
 
     fk = kinematics()
@@ -284,7 +284,7 @@ def bench_ray(tmp: Path, quick: bool) -> list[Figure]:
 
 def _fixture_session(tmp: Path) -> Path:
     """Both 60-chunk fixture rollouts (three views each), imported into a session once."""
-    from inspector.importers.dreamzero_so101 import import_dreamzero
+    from inspector.data.importers.dreamzero_so101 import import_dreamzero
 
     dest = tmp / "fixture"
     if not dest.exists():
@@ -334,7 +334,7 @@ def _app_tab(session: Path) -> Iterator[tuple[object, str]]:
     has not opened yet, after its default rollout has settled)."""
     from inspector.app import HeadlessClient, InspectorApp
     from inspector.cache import MetricsCache
-    from inspector.sources import open_sources
+    from inspector.data.sources import open_sources
 
     app = InspectorApp(open_sources([session]), port=_free_port(), metrics_cache=MetricsCache(enabled=False))
     try:
@@ -364,8 +364,8 @@ def bench_open(tmp: Path, quick: bool) -> Figure:
     ours = min(open_untouched() for _ in range(1 if quick else 3))
 
     def naive() -> None:
-        from inspector.session import load_rollout
-        from inspector.timeline import build_timeline
+        from inspector.analysis.timeline import build_timeline
+        from inspector.data.session import load_rollout
 
         r = load_rollout(session / "rollouts" / "ep000_train")
         build_timeline(r)

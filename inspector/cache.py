@@ -27,8 +27,8 @@ ENV_DIR = "INSPECTOR_CACHE_DIR"
 DEFAULT_FRAME_CACHE_MB = 256
 SCHEMA = "inspector.metrics-cache/1"
 # The modules whose code decides the cached numbers.
-_METRIC_MODULES = ("metrics.py", "sweep.py", "video_metrics.py", "timeline.py", "kinematics.py", "units.py",
-                   "ground_truth.py", "report_row.py", "video.py")
+_METRIC_MODULES = ("analysis/metrics.py", "analysis/sweep.py", "analysis/video_metrics.py", "analysis/timeline.py",
+                   "robot/kinematics.py", "units.py", "data/ground_truth.py", "report/rows.py", "data/video.py")
 
 
 def default_dir() -> Path:
@@ -70,8 +70,8 @@ def rollout_key(rollout, gt, limit_margin_deg: float) -> str:
     """The cache key of a rollout's metrics (see the module docstring).
 
     Args:
-        rollout: a :class:`inspector.session.Rollout`.
-        gt: its :class:`inspector.ground_truth.GroundTruth`.
+        rollout: a :class:`inspector.data.session.Rollout`.
+        gt: its :class:`inspector.data.ground_truth.GroundTruth`.
         limit_margin_deg: the joint-limit margin the numbers were computed with [deg].
     """
     root = Path(rollout.root).resolve()

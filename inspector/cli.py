@@ -20,17 +20,20 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Callable, Sequence
 
 from .cache import DEFAULT_FRAME_CACHE_MB
 from .errors import InspectorError
+from .units import DEFAULT_LIMIT_MARGIN_DEG
 
 EXIT_BAD_INPUT = 2
 
 
+# Each command imports what it runs when it runs: `inspector info` must not pay for rerun, viser or
+# the metrics (about a second of imports), so these imports stay inside the functions.
 def _cmd_import(args: argparse.Namespace) -> int:
-    from .importers.dreamzero_so101 import import_dreamzero
+    from .data.importers.dreamzero_so101 import import_dreamzero
 
     dest = import_dreamzero(args.src, args.output, dataset=args.dataset, episode=args.episode,
                             overwrite=args.overwrite)
@@ -39,7 +42,7 @@ def _cmd_import(args: argparse.Namespace) -> int:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
-    from .info import describe, format_info
+    from .data.info import describe, format_info
 
     info = describe(Path(args.path))
     print(json.dumps(info, indent=2) if args.json else format_info(info))
@@ -47,12 +50,12 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from .report import build_report, format_report
+    from .report.build import build_report, format_report
 
     report = build_report(args.paths, dataset=args.dataset, jobs=args.jobs, use_cache=not args.no_cache,
                           limit_margin_deg=args.limit_margin, ray=args.ray)
     if args.html:
-        from .report_html import write_report_html
+        from .report.html import write_report_html
 
         print(f"wrote {write_report_html(report, args.html, sources=args.paths)}", file=sys.stderr)
     print(json.dumps(report, indent=2) if args.json else format_report(report))
@@ -60,7 +63,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from .compare import build_comparison, format_comparison
+    from .report.compare import build_comparison, format_comparison
 
     comparison = build_comparison(args.a, args.b, dataset=args.dataset, jobs=args.jobs,
                                   use_cache=not args.no_cache, limit_margin_deg=args.limit_margin)
@@ -77,7 +80,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from .export import export_cli
+    from .export.command import export_cli
 
     return export_cli(args.path, args.output, rollout=args.rollout, views=args.views,
                       dataset=args.dataset, use_cache=not args.no_cache, limit_margin_deg=args.limit_margin,
@@ -125,8 +128,6 @@ def _margin(text: str) -> float:
 
 
 def _limit_margin_argument(p: argparse.ArgumentParser) -> None:
-    from .units import DEFAULT_LIMIT_MARGIN_DEG
-
     p.add_argument("--limit-margin", type=_margin, default=DEFAULT_LIMIT_MARGIN_DEG, metavar="DEG",
                    help="a joint counts as past its URDF limit only beyond this margin "
                         f"(default {DEFAULT_LIMIT_MARGIN_DEG:g} deg)")

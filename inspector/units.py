@@ -12,8 +12,9 @@ Values are never clamped: a prediction past a limit stays past it, so it can be 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal, Sequence
+from typing import Literal
 
 import numpy as np
 import numpy.typing as npt

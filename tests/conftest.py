@@ -42,7 +42,7 @@ def dreamzero_dir(fixtures_dir: Path) -> Path:
 @pytest.fixture(scope="session")
 def imported_session(dreamzero_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Every DreamZero-SO101 fixture imported once into a native session (read-only for tests)."""
-    from inspector.importers.dreamzero_so101 import import_dreamzero
+    from inspector.data.importers.dreamzero_so101 import import_dreamzero
 
     dest = tmp_path_factory.mktemp("imported") / "dz"
     import_dreamzero(dreamzero_dir, dest, log=lambda _: None)

@@ -73,7 +73,7 @@ class FakeHub:
         h.end_headers()
         h.wfile.write(data)
 
-    def __enter__(self) -> "FakeHub":
+    def __enter__(self) -> FakeHub:
         threading.Thread(target=self._server.serve_forever, daemon=True).start()
         return self
 

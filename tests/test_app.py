@@ -35,7 +35,7 @@ def make_sessions(fixtures_dir: Path, root: Path) -> tuple[Path, Path]:
     The copy's ``f000`` has a truncated ``actions.npy`` (the rollout fails to load) and its
     ``ep000_novel`` a truncated GT front video (that view fails, the rest of the rollout works).
     """
-    from inspector.importers.dreamzero_so101 import import_dreamzero
+    from inspector.data.importers.dreamzero_so101 import import_dreamzero
 
     good = import_dreamzero(fixtures_dir / "dreamzero_so101", root / "fixture", log=lambda _: None)
     broken = root / "broken"
@@ -324,7 +324,7 @@ def test_notes_from_two_tabs_both_survive(app, sessions):
 
 
 def test_export_sends_the_recording(app):
-    pytest.importorskip("inspector.export")
+    pytest.importorskip("inspector.export.recording")
     client, tab = connect(app)
     with client:
         assert tab.open(key(app, "f084"))

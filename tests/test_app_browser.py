@@ -204,7 +204,7 @@ def test_playback_is_a_video_the_browser_presents_at_the_rollout_rate(browser):
     """Playing the demo, every panel becomes a clip the browser plays by itself: it presents
     frames at the clip's rate, where stepping images manages under one a second here (WebGL in
     software). Pause brings back the images of the step playback stopped at."""
-    from inspector.sources import BUNDLED_DEMO
+    from inspector.data.sources import BUNDLED_DEMO
 
     demo = serve([BUNDLED_DEMO], port=0, block=False)
     try:
@@ -300,8 +300,8 @@ def test_screenshot(browser, app, tmp_path):
     """Screenshots of the app: the fixture session's imported rollout and, when it is built, the
     bundled demo; with INSPECTOR_DOCS_SCREENSHOT=1 they refresh docs/imported.png and
     docs/screenshot.png."""
-    from inspector.session import is_session
-    from inspector.sources import BUNDLED_DEMO
+    from inspector.data.session import is_session
+    from inspector.data.sources import BUNDLED_DEMO
 
     shots = [(app, "ep000_train", DOCS_IMPORTED)]
     if os.environ.get("INSPECTOR_DOCS_SCREENSHOT") and is_session(BUNDLED_DEMO):

@@ -39,8 +39,8 @@ from test_app_browser import browser, open_in_page, page_tab  # noqa: F401  (bro
 
 from inspector.app import HeadlessClient, serve
 from inspector.app._annotations import read_annotations, update_annotation
+from inspector.data.sources import check_confined, open_sources
 from inspector.errors import InspectorError
-from inspector.sources import check_confined, open_sources
 
 ESCAPE = "resolves outside the served roots"
 
@@ -143,7 +143,7 @@ def test_four_browser_pages_hold_their_own_timelines(browser, app, server_errors
     assert [(t.key, t.step) for t in tabs] == [(k, s) for *_, k, s in plan]
     assert [t.chunk for t in tabs] == [3, 7, 0, 10]
     # Client side: each page's slider and video show its own position.
-    for page, tab, (_, label, presses, *_) in zip(pages, tabs, plan):
+    for page, (_, label, presses, *_) in zip(pages, plan):
         assert slider_thumb(page, label).get_attribute("aria-valuenow") == str(presses)
 
     def shows_own_frame(page, tab) -> bool:

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from inspector.compare import compare_reports, pair_rows, paired_summary
+from inspector.report.compare import compare_reports, pair_rows, paired_summary
 
 DEMO = Path(__file__).resolve().parents[1] / "sessions" / "demo"
 OFFSET_DEG = 10.0  # added to shoulder_pan of every predicted action of the rollouts below

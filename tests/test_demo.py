@@ -9,10 +9,10 @@ import sys
 import numpy as np
 import pytest
 
+from inspector.analysis.metrics import prompt_divergence
+from inspector.analysis.timeline import build_timeline
+from inspector.data.session import open_session
 from inspector.demo.generate import DEMO_DIR
-from inspector.metrics import prompt_divergence
-from inspector.session import open_session
-from inspector.timeline import build_timeline
 from inspector.units import JOINT_NAMES
 
 ELBOW, WRIST_FLEX, GRIPPER = (JOINT_NAMES.index(j) for j in ("elbow_flex", "wrist_flex", "gripper"))

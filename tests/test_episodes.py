@@ -17,8 +17,8 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
+from inspector.data.session import SessionWriter
 from inspector.errors import InspectorError
-from inspector.session import SessionWriter
 from inspector.units import JOINT_NAMES
 
 REPO = Path(__file__).resolve().parents[1]
@@ -62,7 +62,7 @@ def _cli(*args: str, env: dict | None = None, timeout: float = 300) -> subproces
 def app(v30, v21):
     from inspector.app import InspectorApp
     from inspector.cache import MetricsCache
-    from inspector.sources import open_sources
+    from inspector.data.sources import open_sources
 
     app = InspectorApp(open_sources([v30, v21], confine=True, datasets=True), port=0,
                        metrics_cache=MetricsCache(enabled=False))
@@ -108,7 +108,7 @@ def test_an_episode_shows_commanded_and_measured_arms_and_its_cameras(app, v30):
 
 def test_episode_frames_are_the_dataset_frames(app, v30):
     from inspector.app._frames import jpeg_data_uri
-    from inspector.lerobot_dataset import LeRobotDataset
+    from inspector.data.lerobot_dataset import LeRobotDataset
 
     key = next(k for k in app.catalog.keys() if k.startswith("so101_v30 / episode 2 "))
     loaded = app.catalog.load(key)
@@ -150,7 +150,7 @@ def test_export_an_episode(v30, tmp_path):
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from test_export import Recording
 
-    from inspector import export_layout as L
+    from inspector.export import layout as L
 
     rec = Recording(dest)
     description = rec.static(L.DESCRIPTION, "TextDocument:text")[0][0]
@@ -168,7 +168,7 @@ def test_export_an_episode(v30, tmp_path):
 
 
 def test_a_rollout_whose_episode_is_missing_is_stated(v30, tmp_path):
-    from inspector.report import build_report
+    from inspector.report.build import build_report
 
     with SessionWriter.create(tmp_path / "s", dataset=str(v30)) as w:
         w.add_rollout("ep001_train", kind="autoregressive", actions=np.zeros((2, 24, 6)), episode_index=1)
@@ -181,7 +181,7 @@ def test_a_rollout_whose_episode_is_missing_is_stated(v30, tmp_path):
 
     from inspector.app import HeadlessClient, InspectorApp
     from inspector.cache import MetricsCache
-    from inspector.sources import open_sources
+    from inspector.data.sources import open_sources
 
     app = InspectorApp(open_sources([tmp_path / "s"], confine=True), port=0, metrics_cache=MetricsCache(enabled=False))
     try:
@@ -200,7 +200,7 @@ def test_a_rollout_whose_episode_is_missing_is_stated(v30, tmp_path):
 def test_a_dataset_of_thousands_of_episodes_opens_from_its_index(tmp_path):
     """2,000 episodes: serving reads meta/ only (its data file may even be gone), memory stays small,
     and opening an episode whose data is missing shows an error card naming the file."""
-    from inspector.lerobot_writer import EpisodeData, write_lerobot_dataset
+    from inspector.data.lerobot_writer import EpisodeData, write_lerobot_dataset
 
     rng = np.random.default_rng(0)
     episodes = [EpisodeData(f"task {i % 7}", rng.normal(0, 10, (4, 6)), rng.normal(0, 10, (4, 6)))
@@ -211,7 +211,7 @@ def test_a_dataset_of_thousands_of_episodes_opens_from_its_index(tmp_path):
 
     from inspector.app import HeadlessClient, InspectorApp
     from inspector.cache import MetricsCache
-    from inspector.sources import open_sources
+    from inspector.data.sources import open_sources
 
     start = time.perf_counter()
     app = InspectorApp(open_sources([root], confine=True, datasets=True), port=0,
@@ -270,7 +270,7 @@ def test_an_unreachable_hub_is_one_line(tmp_path):
 
 
 def test_find_dataset_refuses_a_directory_without_info(tmp_path):
-    from inspector.lerobot_dataset import find_dataset
+    from inspector.data.lerobot_dataset import find_dataset
 
     with pytest.raises(InspectorError, match="meta/info.json is missing"):
         find_dataset(tmp_path, download=True)
@@ -286,8 +286,18 @@ def test_episode_view_in_chromium(v30, tmp_path):
     """Pick an episode in Debian Chromium: its cameras, both arms' card and plots, and the frame
     slider moving the camera frames."""
     sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from browser import (canvas_is_drawn, frame_sources, hide_software_webgl_notice, launch, open_app,
-                         page_client_id, select_option, skip_reason, slider_thumb, wait_until)
+    from browser import (
+        canvas_is_drawn,
+        frame_sources,
+        hide_software_webgl_notice,
+        launch,
+        open_app,
+        page_client_id,
+        select_option,
+        skip_reason,
+        slider_thumb,
+        wait_until,
+    )
 
     reason = skip_reason()
     if reason:

@@ -10,10 +10,18 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from inspector.kinematics import So101Kinematics, kinematics
-from inspector.robot import load_urdf, resolved_urdf_text, urdf_path
-from inspector.units import (JOINT_LIMITS_RAD, JOINT_NAMES, Units, from_radians, guess_arm_units,
-                             joint_order, limits_in_units, to_radians)
+from inspector.robot.description import load_urdf, resolved_urdf_text, urdf_path
+from inspector.robot.kinematics import So101Kinematics, kinematics
+from inspector.units import (
+    JOINT_LIMITS_RAD,
+    JOINT_NAMES,
+    Units,
+    from_radians,
+    guess_arm_units,
+    joint_order,
+    limits_in_units,
+    to_radians,
+)
 
 
 def test_urdf_limits_match_unit_table():
@@ -147,7 +155,7 @@ def test_link_origins_equal_full_poses_for_every_link():
 
 
 def test_without_the_mesh_package_the_arm_is_drawn_with_boxes(monkeypatch):
-    from inspector import robot
+    from inspector.robot import description as robot
 
     monkeypatch.setattr(robot, "mesh_dir", lambda: None)
     robot.resolved_urdf_text.cache_clear()

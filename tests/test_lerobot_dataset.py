@@ -13,12 +13,17 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from inspector.data.lerobot_dataset import (
+    INFO_PATH,
+    LeRobotDataset,
+    find_dataset,
+    is_lerobot_dataset,
+    lerobot_home_dirs,
+)
+from inspector.data.lerobot_writer import EpisodeData, write_lerobot_dataset
+from inspector.data.video import decode
 from inspector.errors import InspectorError
-from inspector.lerobot_dataset import (INFO_PATH, LeRobotDataset, find_dataset, is_lerobot_dataset,
-                                       lerobot_home_dirs)
-from inspector.lerobot_writer import EpisodeData, write_lerobot_dataset
 from inspector.units import JOINT_NAMES, Units, canonical_joint_name
-from inspector.video import decode
 
 # Collected at import time so each dataset is its own test; the `fixtures_dir` fixture skips when
 # ../shared is absent.

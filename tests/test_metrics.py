@@ -9,10 +9,10 @@ import sys
 import numpy as np
 import pytest
 
-from inspector import metrics
-from inspector.kinematics import kinematics
-from inspector.session import SessionWriter, open_session
-from inspector.timeline import build_timeline
+from inspector.analysis import metrics
+from inspector.analysis.timeline import build_timeline
+from inspector.data.session import SessionWriter, open_session
+from inspector.robot.kinematics import kinematics
 from inspector.units import Units
 
 
@@ -59,7 +59,7 @@ def test_frames_shown_while_comparing_do_not_change_the_psnr(imported_session):
     """The app compares a view while it caches the frames it shows (``on_imagined``/``on_gt``),
     reusing the GT frame scaled for display: the PSNR is the one computed without them, and
     each GT frame shown is the clip's frame scaled to the imagined size."""
-    from inspector.video_metrics import compare_clips
+    from inspector.analysis.video_metrics import compare_clips
 
     tl = build_timeline(open_session(imported_session).rollouts["ep000_train"])
     imagined, gt = tl.rollout.video("front"), tl.gt.clips["front"]
@@ -83,7 +83,7 @@ def test_mosaic_sample_front_psnr_and_the_sources_figure(imported_session):
     meta's ``video_psnr_db`` (~4.8 dB, the whole mosaic against the front view) is shown as the
     source's figure with its note, on the app's card and in the recording's description."""
     from inspector.app._cards import headline_metrics
-    from inspector.export_description import describe
+    from inspector.export.description import describe
 
     r = open_session(imported_session).rollouts["train_ep0"]
     tl = build_timeline(r)
@@ -272,7 +272,7 @@ def test_report_json_on_fixtures(dreamzero_dir):
 
 
 def test_sweep_equals_per_rollout_timelines(tmp_path):
-    from inspector.sweep import sweep_metrics
+    from inspector.analysis.sweep import sweep_metrics
 
     gt = _smooth_path(400)
     t = np.arange(360)

@@ -32,7 +32,7 @@ from inspector.app._overview_table import (
     table_html,
 )
 from inspector.cache import MetricsCache
-from inspector.sources import BUNDLED_DEMO
+from inspector.data.sources import BUNDLED_DEMO
 
 DOCS_SCREENSHOT = Path(__file__).resolve().parents[1] / "docs" / "overview.png"
 OFFSET_DEG = 3.0
@@ -59,7 +59,7 @@ def _demo_copy(dest: Path, name: str, offset_tags=(), broken_tag: str | None = N
 
 def _catalog(paths, cache: MetricsCache):
     from inspector.app._catalog import Catalog
-    from inspector.sources import open_sources
+    from inspector.data.sources import open_sources
 
     return Catalog(open_sources(paths, confine=True, datasets=True), None, {}, metrics_cache=cache)
 
@@ -82,7 +82,7 @@ def test_rows_are_computed_once_then_listed_from_the_cache(tmp_path, monkeypatch
     assert rows["tempo_0.8x"].summary["tempo"] == pytest.approx(0.8, abs=0.05)
 
     # A second app on the same cache lists every row without computing any.
-    import inspector.report_jobs as report_jobs
+    import inspector.report.tasks as report_jobs
 
     def no_computing(*args, **kwargs):
         raise AssertionError("a cached row was computed again")

@@ -20,14 +20,16 @@ from pathlib import Path
 import pytest
 
 from inspector.errors import InspectorError
-from inspector.report import build_report
-from inspector.report_jobs import Task, rollouts_per_task, run_task
+from inspector.report.build import build_report
+from inspector.report.tasks import Task, rollouts_per_task, run_task, run_tasks_on_ray
 
 ray = pytest.importorskip("ray", reason="Ray is an optional extra: pip install -e '.[ray]'")
 
-from inspector.export import export_cli  # noqa: E402
-from inspector.ray_jobs import bundle_tasks, check_address, import_ray, ray_workers  # noqa: E402
 from test_export import rrd_verify  # noqa: E402
+
+from inspector.export.command import export_cli  # noqa: E402
+from inspector.jobs.ray import check_address, import_ray, ray_workers  # noqa: E402
+from inspector.report.tasks import bundle_tasks  # noqa: E402
 
 pytestmark = pytest.mark.slow
 
@@ -162,7 +164,7 @@ def test_ray_workers_honour_the_metrics_cache(local_ray, tmp_path):
     again = run_task(Task(str(DEMO), tags, None, 2.0, str(cache)))  # here, from what Ray's workers wrote
     assert [o.cached for o in again] == [True] * len(tags)
     assert [o.row for o in again] == first["rollouts"]
-    outcomes = [o for batch in local_ray.run_tasks([Task(str(DEMO), tags, None, 2.0, str(cache))]) for o in batch]
+    outcomes = [o for batch in run_tasks_on_ray(local_ray, [Task(str(DEMO), tags, None, 2.0, str(cache))]) for o in batch]
     assert all(o.cached for o in outcomes) and len(outcomes) == len(tags)
 
 

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 from browser import canvas_is_drawn, launch, skip_reason, wait_until
 
-from inspector.report import build_report
-from inspector.report_figures import joint_overlay, per_step_rmse, rmse_by_position
-from inspector.report_html import render_report_html
-from inspector.svg_plot import Axes, legend_html, nice_ticks
+from inspector.report.build import build_report
+from inspector.report.figures import joint_overlay, per_step_rmse, rmse_by_position
+from inspector.report.html import render_report_html
+from inspector.report.svg import Axes, legend_html, nice_ticks
 
 DEMO = Path(__file__).resolve().parents[1] / "sessions" / "demo"
 SINGLE = {"f000": "zeroshot_chunk/f000", "f084": "zeroshot_chunk/f084", "f169": "zeroshot_chunk/f169",
@@ -163,7 +163,7 @@ def test_html_figures_draw_the_metas_numbers(fixture_report, metas):
 
 
 def test_drift_figure_draws_every_rollout_and_marks_each_episode_end(demo_report):
-    from inspector.lerobot_dataset import open_dataset
+    from inspector.data.lerobot_dataset import open_dataset
 
     rows = demo_report["rollouts"]
     lengths = {i: open_dataset(DEMO / "dataset").episode(i).length for i in (0, 1)}
@@ -195,7 +195,7 @@ def test_drift_figure_draws_every_rollout_and_marks_each_episode_end(demo_report
 
 
 def test_rows_know_their_episode_length(demo_report):
-    from inspector.lerobot_dataset import open_dataset
+    from inspector.data.lerobot_dataset import open_dataset
 
     ds = open_dataset(DEMO / "dataset")
     for r in demo_report["rollouts"]:

@@ -19,12 +19,12 @@ import numpy as np
 import pytest
 
 from inspector.app._frames import FrameCache
+from inspector.data.session import SessionWriter
+from inspector.data.video import VideoClip, encode_h264
 from inspector.errors import InspectorError
-from inspector.report import build_report
-from inspector.report_jobs import Task, run_task
-from inspector.report_row import prompt_pairs
-from inspector.session import SessionWriter
-from inspector.video import VideoClip, encode_h264
+from inspector.report.build import build_report
+from inspector.report.rows import prompt_pairs
+from inspector.report.tasks import Task, run_task
 
 REPO = Path(__file__).resolve().parents[1]
 DEMO = REPO / "sessions" / "demo"
@@ -52,7 +52,7 @@ def test_frame_cache_evicts_least_recently_used_within_budget():
 def small_budget_app():
     from inspector.app import InspectorApp
     from inspector.cache import MetricsCache
-    from inspector.sources import open_sources
+    from inspector.data.sources import open_sources
 
     # one autoregressive demo rollout's frames (two views, imagined + GT) take ~23 MB as JPEG: the
     # budget holds one and a half
@@ -174,7 +174,7 @@ def test_frames_at_their_own_size_skip_the_area_filter_with_the_same_pixels(tmp_
     are those the area filter gives."""
     import av
 
-    from inspector.video import RgbConverter
+    from inspector.data.video import RgbConverter
 
     clip = tmp_path / "c.mp4"
     encode_h264(clip, _moving_frames(12, 322, 182), fps=30, preset="ultrafast")
@@ -251,9 +251,9 @@ def test_report_is_the_same_with_one_or_two_workers_and_from_the_cache(tmp_path)
 
 def test_a_rollouts_numbers_do_not_depend_on_its_batch():
     """Bit for bit: how rollouts are cut into tasks (``--jobs``, ``--ray``) never shows in a row."""
-    from inspector.ground_truth import resolve_ground_truth
-    from inspector.session import open_session
-    from inspector.timeline import build_timelines
+    from inspector.analysis.timeline import build_timelines
+    from inspector.data.ground_truth import resolve_ground_truth
+    from inspector.data.session import open_session
 
     session = open_session(DEMO)
     rollouts = [session.rollouts[t] for t in ("bias_elbow", "limits_wrist", "prompt_novel", "prompt_train")]

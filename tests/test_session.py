@@ -12,8 +12,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from inspector.data.session import SessionWriter, load_rollout, open_session
 from inspector.errors import InspectorError
-from inspector.session import SessionWriter, load_rollout, open_session
 
 
 def _write_small_session(root: Path, **kwargs) -> Path:
@@ -116,7 +116,7 @@ def test_importer_reads_every_fixture_dir(imported_session):
     assert mosaic.views == ["front", "gripper", "top"] and mosaic.gt_views == ["front"]
     assert mosaic.extra["source"]["name"] == "train_ep0"
     # GT frames are scaled to the imagined clip's size to compare; the front view matches it
-    from inspector.timeline import build_timeline
+    from inspector.analysis.timeline import build_timeline
 
     psnr = build_timeline(mosaic).video_metrics("front").psnr_db
     assert len(psnr) == len(mosaic.video("front")) and np.isfinite(psnr).all()
@@ -130,7 +130,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
 def test_cli_import_prints_one_line_per_rollout(dreamzero_dir, tmp_path):
     out = _cli("import", "dreamzero-so101", str(dreamzero_dir / "train_rollout"), "-o", str(tmp_path / "s"))
     assert out.returncode == 0, out.stderr
-    lines = [l for l in out.stdout.splitlines() if l.startswith("ep000_")]
+    lines = [line for line in out.stdout.splitlines() if line.startswith("ep000_")]
     assert len(lines) == 2 and "60 chunk(s) x 24 steps" in lines[0]
 
 

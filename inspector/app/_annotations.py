@@ -27,8 +27,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from ..data.session import ANNOTATIONS_FILE, read_json, write_json_atomic
 from ..errors import InspectorError
-from ..session import ANNOTATIONS_FILE, read_json, write_json_atomic
 
 SCHEMA = "inspector.annotations/1"
 LOCK_FILE = ".annotations.lock"

@@ -9,11 +9,15 @@ from __future__ import annotations
 
 import html
 from collections.abc import Sequence
+from typing import cast
 
 import numpy as np
+import numpy.typing as npt
 
+from ..analysis import metrics
+from ..analysis.timeline import RolloutTimeline
 from ..errors import InspectorError, one_line
-from ..timeline import RolloutTimeline
+from ..units import JOINT_NAMES
 from ._frames import LOADING, READY, FramePair
 
 CARD = "font-size:0.8rem;line-height:1.35;padding:0.1rem 0.2rem"
@@ -41,7 +45,7 @@ def unit(tl: RolloutTimeline) -> str:
     return "°" if tl.units.arm == "degrees" else " u"
 
 
-def _fmt(value: float | None, suffix: str = "", digits: int = 1) -> str:
+def _fmt(value: float | np.floating | None, suffix: str = "", digits: int = 1) -> str:
     if value is None or not np.isfinite(value):
         return "—"
     return f"{value:.{digits}f}{suffix}"
@@ -60,11 +64,13 @@ def headline_metrics(tl: RolloutTimeline, psnr: dict[str, np.ndarray | None] | N
     if tl.has_gt_joints:
         inside = ~tl.post_episode if tl.post_episode is not None else np.ones(tl.n_steps, bool)
         ta = tl.time_aligned_drift
+        assert ta is not None  # set with the GT joints
         finite_rmse = tl.chunk_rmse[np.isfinite(tl.chunk_rmse)] if tl.chunk_rmse is not None else np.zeros(0)
         rows.append(("chunk RMSE (mean)", _fmt(finite_rmse.mean() if finite_rmse.size else None, u, 2)))
         if inside.any():
             rows.append(("time-aligned drift", f"mean {_fmt(ta[inside].mean(), u)} · final "
                                                f"{_fmt(ta[inside][-1], u)}"))
+            assert tl.best_match_drift is not None  # a rollout (not an episode) with GT joints has every alignment
             rows.append(("best-match drift", f"mean {_fmt(tl.best_match_drift[inside].mean(), u)}"))
         if (~inside).any():
             rows.append(("drift past episode end", f"mean {_fmt(ta[~inside].mean(), u)} "
@@ -78,7 +84,6 @@ def headline_metrics(tl: RolloutTimeline, psnr: dict[str, np.ndarray | None] | N
     limits = tl.limit_summary()
     name = f"steps past a joint limit (+{tl.limit_margin_deg:g}° margin)"
     if limits.steps:
-        from ..units import JOINT_NAMES
 
         joints = ", ".join(j for j, n in zip(JOINT_NAMES, limits.by_joint) if n)
         rows.append((name, f"{limits.steps} of {tl.n_steps} ({joints})"))
@@ -110,10 +115,10 @@ def reference_rows(extra: object) -> list[tuple[str, str]]:
 
 def episode_metrics(tl: RolloutTimeline) -> list[tuple[str, str]]:
     """(name, value) rows summarising a dataset episode: how well the follower tracked its command."""
-    from ..units import JOINT_NAMES
-
     u = unit(tl)
     err = tl.time_aligned_drift
+    # an episode's timeline always has GT joints (the measured arm)
+    assert err is not None and tl.gt_aligned is not None
     rows = [("tracking error |commanded − measured|", f"mean {_fmt(err.mean(), u)} · max {_fmt(err.max(), u)}")]
     if tl.chunk_errors is not None:
         per_joint = tl.chunk_errors.per_joint_rmse
@@ -122,13 +127,12 @@ def episode_metrics(tl: RolloutTimeline) -> list[tuple[str, str]]:
     if tl.ee_error_mm is not None:
         rows.append(("end-effector tracking error", f"mean {_fmt(tl.ee_error_mm.mean(), ' mm', 1)} · "
                                                      f"max {_fmt(tl.ee_error_mm.max(), ' mm', 1)}"))
-    from .. import metrics
 
     margin = f"(+{tl.limit_margin_deg:g}° margin)"
     measured_excess = metrics.limit_excess(tl.gt_aligned, tl.limits)
     for name, flags in (("commanded", tl.limit_violation), ("measured", measured_excess > tl.limit_margin)):
         steps = int(flags.any(axis=1).sum())
-        joints = ", ".join(j for j, v in zip(JOINT_NAMES, flags.any(axis=0)) if v)
+        joints = ", ".join(j for j, v in zip(JOINT_NAMES, cast(npt.NDArray[np.bool_], flags.any(axis=0))) if v)
         rows.append((f"{name} steps past a joint limit {margin}",
                      f"{steps} of {tl.n_steps} ({joints})" if steps else "none"))
     return rows

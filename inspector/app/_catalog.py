@@ -5,7 +5,7 @@ sessions under the served roots. Nothing a browser sends is ever used as a path:
 not a key of that dict is simply not found. A rollout whose directory or files resolve (through
 symbolic links) outside its session directory is refused, at start-up and again when opened.
 
-Opening a rollout builds its :class:`~inspector.timeline.RolloutTimeline`, its scene arrays and
+Opening a rollout builds its :class:`~inspector.analysis.timeline.RolloutTimeline`, its scene arrays and
 its frame store once, behind a per-rollout lock (two tabs opening it at once wait for one build).
 The most recently opened rollouts stay built (:data:`KEEP_LOADED`, a few MB each: their frames
 live in the server's frame cache); older ones are dropped and rebuilt when opened again. Video
@@ -21,11 +21,14 @@ from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..episodes import EpisodeRef, dataset_name, episode_refs, episode_rollout
+from ..analysis.timeline import RolloutTimeline, build_timeline
+from ..analysis.video_metrics import VideoMetrics
+from ..cache import rollout_key
+from ..data.episodes import EpisodeRef, episode_refs, episode_rollout
+from ..data.lerobot_dataset import dataset_name
+from ..data.session import Rollout, Session
+from ..data.sources import Sources, check_confined
 from ..errors import InspectorError
-from ..session import Rollout, Session
-from ..sources import Sources, check_confined
-from ..timeline import RolloutTimeline, build_timeline
 from ._frames import FrameCache, FrameStore
 from ._scene import RolloutScene
 
@@ -178,8 +181,6 @@ class Catalog:
         cache = self.metrics_cache
         if cache is None:
             return None
-        from ..cache import rollout_key
-        from ..video_metrics import VideoMetrics
 
         key = rollout_key(tl.rollout, tl.gt, tl.limit_margin_deg)
         record = cache.get(key) or {}

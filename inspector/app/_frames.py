@@ -6,7 +6,7 @@ tabs. No decoded frame outlives the moment it is encoded, so memory follows the 
 number of rollouts ever opened.
 
 A rollout's :class:`FrameStore` fills the cache one view at a time: a worker streams the
-imagined clip and its GT clip together (:func:`inspector.video_metrics.compare_clips`),
+imagined clip and its GT clip together (:func:`inspector.analysis.video_metrics.compare_clips`),
 JPEG-encodes every frame as it passes and computes the view's PSNR on the way, so one decode
 serves both. Reopening a recently seen rollout finds its frames in the cache; frames evicted
 since are decoded again in the background. The scrub path only looks frames up.
@@ -18,17 +18,19 @@ import base64
 import itertools
 import threading
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from concurrent.futures import Executor
 from dataclasses import dataclass
-from typing import Any, Hashable
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
 
+from ..analysis.timeline import RolloutTimeline
+from ..analysis.video_metrics import compare_clips
 from ..cache import DEFAULT_FRAME_CACHE_MB
-from ..timeline import RolloutTimeline
-from ..video import fit_size
+from ..data.video import fit_size
+from ..errors import InspectorError
 from ._listeners import Listeners, Notifying
 
 LOADING = "loading"
@@ -132,7 +134,7 @@ class FrameStore(Notifying):
         timeline: the rollout's shared timeline.
         executor: where decoding runs (a small pool shared by the app).
         cache: the server's frame cache.
-        on_video_metrics: called with each view's :class:`~inspector.video_metrics.VideoMetrics`
+        on_video_metrics: called with each view's :class:`~inspector.analysis.video_metrics.VideoMetrics`
             once computed (the app stores them in the metrics cache).
     """
 
@@ -215,9 +217,6 @@ class FrameStore(Notifying):
 
     def _fill_view(self, view: str) -> None:
         """Stream the view's clips into the cache, computing PSNR on the way where it has both."""
-        from ..errors import InspectorError
-        from ..video_metrics import compare_clips
-
         tl = self.timeline
         gt_clip = tl.gt.clips.get(view)
         imagined_key, gt_key = self._keys(view)
@@ -359,7 +358,7 @@ def jpeg_data_uri(frame: npt.NDArray[np.uint8], size: tuple[int, int] | None = N
         from PIL import Image
 
         frame = np.asarray(Image.fromarray(np.ascontiguousarray(frame)).resize(
-            tuple(size), Image.Resampling.BILINEAR, reducing_gap=2.0))
+            cast(tuple[int, int], tuple(size)), Image.Resampling.BILINEAR, reducing_gap=2.0))
     data = simplejpeg.encode_jpeg(np.ascontiguousarray(frame), quality=quality, colorspace="RGB")
     return "data:image/jpeg;base64," + base64.b64encode(data).decode("ascii")
 

@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import msgspec
 
@@ -40,8 +41,9 @@ class HeadlessClient:
     def __init__(self, port: int, host: str = "127.0.0.1", observe: bool = False) -> None:
         import viser
         from websockets.sync.client import connect
+        from websockets.typing import Subprotocol
 
-        self._ws = connect(f"ws://{host}:{port}", subprotocols=[f"viser-v{viser.__version__}"],
+        self._ws = connect(f"ws://{host}:{port}", subprotocols=[Subprotocol(f"viser-v{viser.__version__}")],
                            max_size=None, open_timeout=10)
         self.received_bytes = 0
         self._observe = observe

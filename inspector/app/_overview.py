@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import TYPE_CHECKING
 
 from ..errors import InspectorError
 from ._annotations import read_annotations
 from ._cards import error_card
+from ._host import OverviewHost
 from ._overview_table import (
     ALL_SESSIONS,
     KIND_FILTERS,
@@ -39,9 +39,6 @@ from ._overview_table import (
     sort_options,
     table_html,
 )
-
-if TYPE_CHECKING:
-    from ._state import TabState
 
 # Rows arriving redraw a tab's table at most this often, its figures less often (a thousand
 # rollouts' figures are most of a megabyte of SVG for the browser to lay out) [s].
@@ -64,7 +61,7 @@ class OverviewPanel:
         shown: the rows the table shows, in order (for tests).
     """
 
-    def __init__(self, tab: TabState) -> None:
+    def __init__(self, tab: OverviewHost) -> None:
         self.tab = tab
         self.store = tab.app.overview_rows
         self.visible = False

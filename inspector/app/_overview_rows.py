@@ -1,6 +1,6 @@
 """The overview's rows: one summary row per served rollout, computed once and shared by every tab.
 
-Rows come from the report machinery (:mod:`inspector.report_jobs`) and its on-disk metrics cache.
+Rows come from the report machinery (:mod:`inspector.report.tasks`) and its on-disk metrics cache.
 A first pass takes every row the cache holds, and the rollouts that cannot be read, without
 decoding any video, so a cached evaluation of 1,000 rollouts lists in seconds; a second pass
 computes the rest, a few rollouts per task, and each task's rows appear as it finishes. Only
@@ -23,6 +23,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from ..jobs.pool import init_worker as _init_worker
+from ..report.tasks import Outcome, cached_outcomes, plan_tasks, run_task
 from ..units import DEFAULT_LIMIT_MARGIN_DEG
 from ._listeners import Listeners, Notifying
 
@@ -42,7 +44,7 @@ class OverviewRow:
         session: its session's name in the picker.
         tag, kind, prompt: as the rollout says (kind ``unreadable`` when it failed to load).
         session_root: the session directory (for its annotations).
-        summary: its report row (:func:`inspector.report_row.rollout_summary`), None until
+        summary: its report row (:func:`inspector.report.rows.rollout_summary`), None until
             computed or when it failed.
         error: why it has no row (one line), or None.
         cached: the row came from the metrics cache.
@@ -134,7 +136,6 @@ class OverviewRows(Notifying):
         self._stop.set()
 
     def _run(self) -> None:
-        from ..report_jobs import cached_outcomes, plan_tasks, run_task
 
         _lower_priority()
         try:
@@ -182,8 +183,6 @@ class OverviewRows(Notifying):
 
 def _guarded(task, fn, with_missing: bool = False):
     """``fn(task)``; anything unforeseen becomes an error outcome for each of its rollouts."""
-    from ..report_jobs import Outcome
-
     try:
         return fn(task)
     except Exception as exc:
@@ -202,7 +201,6 @@ def _background_pool():
 
 
 def _init_background_worker() -> None:
-    from ..report_jobs import _init_worker
 
     try:
         os.nice(BACKGROUND_NICENESS)

@@ -4,7 +4,7 @@ order, the table, the compare summary and the figures, as HTML for viser's HTML 
 No GUI here (see :mod:`._overview`), so tests check selection and rendering directly. Numbers are
 in the data's units as everywhere else: joints in degrees (the gripper's 0..100 counts as is),
 end-effector error in mm, PSNR in dB. The figures are the HTML report's
-(:func:`inspector.report_figures.report_figures`, drawn by :func:`inspector.report_html.figure_html`),
+(:func:`inspector.report.figures.report_figures`, drawn by :func:`inspector.report.html.figure_html`),
 styled by the report's ``chart.css`` scoped under the overview's element.
 """
 
@@ -15,8 +15,11 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from html import escape
 from importlib import resources
-from typing import Any
+from typing import Any, cast
 
+from ..report.compare import compare_reports
+from ..report.figures import report_figures
+from ..report.html import figure_html
 from ._overview_rows import OverviewRow
 
 SCOPE = "inspector-overview"  # the class of the overview's elements; its styles apply under it
@@ -88,11 +91,11 @@ class Note:
 
 @dataclass
 class Comparison:
-    """The table's rows (A) against session B, paired by :func:`inspector.compare.pair_rows`.
+    """The table's rows (A) against session B, paired by :func:`inspector.report.compare.pair_rows`.
 
     Attributes:
         session_b: B's name.
-        result: :func:`inspector.compare.compare_reports` of the computed rows.
+        result: :func:`inspector.report.compare.compare_reports` of the computed rows.
         pair_of: A's key -> (B's key, ``delta_rmse_deg``, ``delta_time_aligned_drift_deg``).
         waiting: rows of either side still computing.
     """
@@ -159,7 +162,7 @@ def select_rows(rows: Sequence[OverviewRow], q: Query, notes: Mapping[str, Note]
         return kept[::-1] if q.descending else kept
     valued = [(sort_value(r, q.sort, notes, comparison), i, r) for i, r in enumerate(kept)]
     have = sorted((t for t in valued if t[0] is not None),
-                  key=lambda t: (-t[0] if q.descending else t[0], t[1]))
+                  key=lambda t: (-cast(float, t[0]) if q.descending else t[0], t[1]))
     return [r for _, _, r in have] + [r for v, _, r in valued if v is None]
 
 
@@ -170,8 +173,6 @@ def select_rows(rows: Sequence[OverviewRow], q: Query, notes: Mapping[str, Note]
 def compare_with_session(rows: Sequence[OverviewRow], q: Query, notes: Mapping[str, Note]) -> Comparison | None:
     """The table's rows (A: what the filters keep, B's own rows aside) against session B's rows,
     over the rows computed so far; None when not comparing."""
-    from ..compare import compare_reports
-
     if q.compare_with == NO_COMPARE:
         return None
     side_a = [r for r in rows if r.session != q.compare_with and _matches(r, q, notes)]
@@ -270,7 +271,8 @@ def _columns(views: Sequence[str], notes: Mapping[str, Note], comparison: Compar
                 _metric_cell("limit steps", "d")),
     ]
     cols += [_Column(f"PSNR {v}", f"imagined vs GT frames, {v} camera [dB]",
-                     lambda r, v=v: "" if r.summary is None else _f(r.summary["video_psnr_db"].get(v), ".1f"))
+                     cast(Callable[[OverviewRow], str],
+                          lambda r, v=v: "" if r.summary is None else _f(r.summary["video_psnr_db"].get(v), ".1f")))
              for v in views]
     cols += [
         _Column("⚑", "flagged in the Notes", lambda r: "⚑" if note_of(r).flag else "", False, "flag"),
@@ -363,9 +365,6 @@ FIGURE_ORDER = ("drift", "per-step-rmse", "rmse-by-position", "joint-overlay")
 
 def figures_html(shown: Sequence[OverviewRow]) -> str:
     """The HTML report's aggregate figures over the computed rows among ``shown``."""
-    from ..report_figures import report_figures
-    from ..report_html import figure_html
-
     summaries = [r.summary for r in shown if r.summary is not None]
     if not summaries:
         return _scoped("<div class='ov-more'>figures appear once rows are computed</div>")
@@ -422,5 +421,5 @@ def scoped_css(css: str, scope: str = SCOPE) -> str:
 
 def overview_css() -> str:
     """The overview's ``<style>``: the report's chart styles and the overview's layout, scoped."""
-    chart = (resources.files("inspector") / "report_assets" / "chart.css").read_text(encoding="utf-8")
+    chart = (resources.files("inspector.report") / "assets" / "chart.css").read_text(encoding="utf-8")
     return f"<style>{scoped_css(chart + _LAYOUT_CSS)}</style>"

@@ -8,11 +8,12 @@ video and plots dock right; the 3D scene fills the middle.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
-from ..metrics import prompt_divergence
-from ..timeline import RolloutTimeline
+from ..analysis.metrics import prompt_divergence
+from ..analysis.timeline import RolloutTimeline
 from ..units import JOINT_NAMES
 from ._cards import unit
 from ._keys import KEYS_HTML
@@ -134,15 +135,18 @@ class PlotPanel:
         gui, t, u = self._gui, tl.t_s, unit(tl)
         ticks = tl.t_s[tl.chunk_start_step[tl.chunk_start_step < tl.n_steps]]
         end = float(tl.episode_end_step / tl.fps) if tl.episode_end_step is not None else None
-        common = {"ticks": ticks, "end": end}
+        common: dict[str, Any] = {"ticks": ticks, "end": end}
         with self.tab_drift:
             if tl.kind == "episode":
+                # an episode's timeline always has GT joints (the measured arm)
+                assert tl.time_aligned_drift is not None and tl.joint_error is not None
                 self._add(CursorPlot(gui, f"Tracking error |commanded − measured| [{u.strip() or 'units'}], "
                                           "L2 over 6 joints", t,
                                      [Line("tracking error", tl.time_aligned_drift, LIMIT_HEX, 1.6)], floor=0.0))
                 self._add(CursorPlot(gui, f"Per joint: commanded − measured [{u.strip() or 'units'}]", t, [
                     Line(j, tl.joint_error[:, k], JOINT_HEX[k], 1.2) for k, j in enumerate(JOINT_NAMES)]))
             elif tl.has_gt_joints:
+                assert tl.time_aligned_drift is not None  # set with the GT joints
                 per_chunk = tl.per_chunk(tl.time_aligned_drift)[tl.step_chunk]
                 self._add(CursorPlot(gui, f"Joint drift [{u.strip() or 'units'}], L2 over 6 joints", t, [
                     Line("time-aligned", tl.time_aligned_drift, LIMIT_HEX, 1.6),
@@ -197,7 +201,7 @@ class PlotPanel:
         j = self.joint.value
         u = "0..100" if j == "gripper" else ("deg" if tl is None or tl.units.arm == "degrees" else "-100..100")
         labels = tl.labels if tl is not None else None
-        pair = f"{labels.pred} vs {labels.gt}" if labels is not None and tl.has_gt_joints else (
+        pair = f"{labels.pred} vs {labels.gt}" if labels is not None and tl is not None and tl.has_gt_joints else (
             labels.pred if labels is not None else "predicted")
         return f"{j} [{u}]: {pair}, limits dashed"
 

@@ -19,7 +19,7 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 import numpy.typing as npt
 
-from ..video import encode_h264_bytes
+from ..data.video import encode_h264_bytes
 
 # Steps per clip: playback is cut into segments at multiples of this, each encoded once (1-2 ms a
 # frame per panel, panels in parallel) and kept in the frame cache. Every swap to the next segment
@@ -50,4 +50,5 @@ def _decoded(uris: Sequence[str]) -> Iterator[npt.NDArray[np.uint8]]:
         if uri != previous:
             rgb = simplejpeg.decode_jpeg(base64.b64decode(uri.split(",", 1)[1]), colorspace="RGB")
             previous = uri
+        assert rgb is not None  # the first uri always differs from None
         yield rgb

@@ -14,11 +14,13 @@ from __future__ import annotations
 
 import threading
 import warnings
+from typing import cast
 
 import numpy as np
 import numpy.typing as npt
 
-from ..meshes import cluster_vertices
+from ..robot.description import load_urdf, resolved_urdf_text
+from ..robot.meshes import cluster_vertices
 from ..units import JOINT_NAMES
 
 # Vertex-clustering cell [m] for the app's copies of the meshes.
@@ -35,7 +37,6 @@ class SharedRobot:
     """
 
     def __init__(self, cell_m: float | None = MESH_CELL_M) -> None:
-        from ..robot import load_urdf
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the fallback reason is shown in the UI instead
@@ -69,7 +70,8 @@ class ArmView:
         color: RGB or RGBA in 0..1 (RGBA draws it translucent).
     """
 
-    def __init__(self, client, robot: SharedRobot, root: str, color: tuple[float, ...]) -> None:
+    def __init__(self, client, robot: SharedRobot, root: str,
+                 color: tuple[float, float, float] | tuple[float, float, float, float]) -> None:
         from viser.extras import ViserUrdf
 
         self._robot = robot
@@ -98,7 +100,6 @@ def joint_child_links() -> dict[str, str]:
     """Joint name -> child link name, read from the URDF XML (no meshes needed)."""
     import xml.etree.ElementTree as ET
 
-    from ..robot import resolved_urdf_text
 
     root = ET.fromstring(resolved_urdf_text()[0])
-    return {j.get("name"): j.find("child").get("link") for j in root.iter("joint")}
+    return {cast(str, j.get("name")): cast(str, cast(ET.Element, j.find("child")).get("link")) for j in root.iter("joint")}

@@ -17,14 +17,16 @@ What is drawn (all in the robot base frame, metres):
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import numpy.typing as npt
 
-from ..kinematics import kinematics
-from ..robot import VIEW_DIRECTION, bounding_sphere
-from ..timeline import RolloutTimeline
+from ..analysis.timeline import RolloutTimeline
+from ..robot.description import VIEW_DIRECTION, bounding_sphere
+from ..robot.kinematics import kinematics
 from ..units import JOINT_NAMES, to_radians
 from ._robot import ArmView, SharedRobot
 
@@ -77,7 +79,7 @@ class RolloutScene:
         fk = kinematics()
         q_pred = to_radians(tl.pred, tl.units)
         n, h = tl.chunks.shape[:2]
-        trail = fk.gripper_positions(tl.chunks.reshape(-1, len(JOINT_NAMES)), tl.units).reshape(n, h, 3)
+        trail = cast(Array, fk.gripper_positions(tl.chunks.reshape(-1, len(JOINT_NAMES)), tl.units).reshape(n, h, 3))
         links = tuple(joint_links[j] for j in JOINT_NAMES)
         poses = fk.link_poses(q_pred, links=links)
         joint_pos = np.stack([poses[link][:, :3, 3] for link in links], axis=1)
@@ -88,7 +90,7 @@ class RolloutScene:
             ee_pred=tl.ee_pred,
             ee_gt=tl.ee_gt,
             trail=trail,
-            trail_violation=tl.chunk_limit_violation.any(axis=-1),
+            trail_violation=cast(npt.NDArray[np.bool_], tl.chunk_limit_violation.any(axis=-1)),
             joint_pos=joint_pos,
             executed=executed,
             steps_per_chunk=tl.steps_per_chunk,
@@ -134,11 +136,11 @@ class TabScene:
                       color=TABLE_RGB)
         scene.add_grid("/ground", width=1.0, height=1.0, cell_size=0.05, section_size=0.25,
                        position=(0.15, 0.0, 0.0))
-        arm = ArmView if robot is not None else _NoArm
+        arm: Callable[..., ArmView | _NoArm] = ArmView if robot is not None else _NoArm
         self.gt_arm = arm(client, robot, "/arms/gt", GT_COLOR)
         self.pred_arm = arm(client, robot, "/arms/pred", PRED_COLOR)
         self._robot = robot
-        self.cmp_arm: ArmView | None = None  # drawn on the first compare: most tabs never need it
+        self.cmp_arm: ArmView | _NoArm | None = None  # drawn on the first compare: most tabs never need it
         self._ee_pred = scene.add_icosphere("/now/pred", radius=0.008, color=PRED_RGB)
         self._ee_gt = scene.add_icosphere("/now/gt", radius=0.008, color=GT_RGB)
         self._limit_spheres = [
@@ -152,7 +154,7 @@ class TabScene:
         self._frame_when_ready: tuple | None = None
         self._watching_camera = False
         # (data, compare, canvas aspect, camera position) of the last framing
-        self._framed: tuple | None = None
+        self._framed: tuple[RolloutScene, RolloutScene | None, float, np.ndarray] | None = None
         self._trail_chunk: int | None = None
         self.data: RolloutScene | None = None
         self.compare: RolloutScene | None = None
@@ -168,16 +170,16 @@ class TabScene:
         has = data is not None
         self.pred_arm.visible = has
         self._ee_pred.visible = has
-        self.gt_arm.visible = has and data.q_gt is not None
+        self.gt_arm.visible = data is not None and data.q_gt is not None
         self._ee_gt.visible = self.gt_arm.visible
         if has and compare is not None and self.cmp_arm is None:
-            arm = ArmView if self._robot is not None else _NoArm
+            arm: Callable[..., ArmView | _NoArm] = ArmView if self._robot is not None else _NoArm
             self.cmp_arm = arm(self._client, self._robot, "/arms/compare", CMP_COLOR)
         if self.cmp_arm is not None:
             self.cmp_arm.visible = has and compare is not None
         for marker in self._limit_spheres:
             marker.visible = False
-        if not has:
+        if data is None:
             return
         self._frame(data, compare)
         self._paths.append(scene.add_line_segments(
@@ -257,6 +259,7 @@ class TabScene:
         self._ee_pred.position = tuple(data.ee_pred[step])
         if data.q_gt is not None:
             self.gt_arm.set_joints(data.q_gt[step])
+            assert data.ee_gt is not None  # both come from the timeline's GT joints
             self._ee_gt.position = tuple(data.ee_gt[step])
         if self.compare is not None and self.cmp_arm is not None:
             self.cmp_arm.set_joints(self.compare.q_pred[min(step, self.compare.n_steps - 1)])

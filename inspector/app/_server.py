@@ -12,9 +12,10 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 from ..cache import DEFAULT_FRAME_CACHE_MB, MetricsCache
+from ..data.session import is_session
+from ..data.sources import BUNDLED_DEMO, Sources, open_sources
 from ..errors import InspectorError
-from ..session import is_session
-from ..sources import BUNDLED_DEMO, Sources, open_sources
+from ..robot.kinematics import kinematics
 from ._catalog import Catalog
 from ._frames import FrameCache
 from ._overview_rows import OverviewRows
@@ -125,7 +126,6 @@ class InspectorApp:
 
 
 def _load_robot() -> SharedRobot:
-    from ..kinematics import kinematics
 
     kinematics()  # build the FK chain now rather than on the first rollout open
     return SharedRobot()

@@ -26,10 +26,11 @@ import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, cast
 
 import numpy as np
 
+from ..analysis.metrics import prompt_divergence
 from ..errors import InspectorError
 from ..units import JOINT_NAMES
 from . import _playback_clip
@@ -37,15 +38,13 @@ from ._annotations import rollout_annotations, update_annotation
 from ._cards import error_card, esc, headline_metrics, rollout_card, unit, video_grid
 from ._catalog import Loaded
 from ._frames import FramePair
+from ._host import AppHost
 from ._keys import HOTKEYS
 from ._light_3d import apply_light_3d
 from ._overview import OverviewPanel
 from ._panels import NO_COMPARE, ControlPanel, PlotPanel, VideoPanel
 from ._playback_clip import CLIP_STEPS, encode_clip
 from ._scene import TabScene
-
-if TYPE_CHECKING:
-    from ._server import InspectorApp
 
 PLAYBACK_FPS = 30.0
 LEFT_PANEL_PX, RIGHT_PANEL_PX = 350, 640
@@ -74,7 +73,7 @@ class TabState:
         pairs: the video pairs last shown (view, frame indices, PSNR) — for tests.
     """
 
-    def __init__(self, app: InspectorApp, client) -> None:
+    def __init__(self, app: AppHost, client) -> None:
         self.app = app
         self.client = client
         self.client_id: int = client.client_id
@@ -247,7 +246,6 @@ class TabState:
         if self.compare is None or self.loaded is None:
             self.controls.compare_info.content = ""
             return
-        from ..metrics import prompt_divergence
 
         a, b = self.loaded.timeline, self.compare.timeline
         _, per_chunk, collapse = prompt_divergence(a.pred, b.pred, a.steps_per_chunk)
@@ -446,7 +444,8 @@ class TabState:
             self.controls.play.label = "Play"
             self.controls.play.icon = "player-play"
             self._next_clip = None
-            plays_out = at_end and self._clip is not None and self._clip.end >= self.loaded.timeline.n_steps
+            # playing implies a loaded rollout (play() needs one; open() pauses before unloading)
+            plays_out = at_end and self._clip is not None and self._clip.end >= cast(Loaded, self.loaded).timeline.n_steps
             if self.loaded is not None and self._clip is not None and not plays_out:
                 self._render_video()  # the step's frames again, where the clips stopped
 
@@ -539,6 +538,7 @@ class TabState:
         if entry is not None and entry.session is None:
             c.notes_info.content = NOTES_NEED_A_SESSION
         elif entry is not None:
+            assert entry.session is not None  # the branch above took entries without a session
             try:
                 self._notes = rollout_annotations(entry.session.root, entry.tag)
             except InspectorError as exc:
@@ -600,9 +600,9 @@ class TabState:
             self._notify("Nothing to export", "Open a rollout first.", color="yellow")
             return None
         try:
-            from ..export import write_recording
+            from ..export.recording import write_recording  # deferred: rerun takes ~0.6 s to import
         except ImportError as exc:
-            self._notify("Export unavailable", f"inspector.export could not be imported ({exc}).", color="red")
+            self._notify("Export unavailable", f"inspector.export.recording could not be imported ({exc}).", color="red")
             return None
         tag = loaded.timeline.tag
         note = self.client.add_notification("Exporting", f"{tag}.rrd …", loading=True, with_close_button=False)

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
+
+__all__ = ["rebuild_demo"]
 
 
 def rebuild_demo(out: Path | None = None, quick: bool = False, log: Callable[[str], None] = print) -> Path:
     """Regenerate the demo session (see :mod:`inspector.demo.generate`)."""
-    from .generate import rebuild_demo as _rebuild
+    from .generate import rebuild_demo as _rebuild  # deferred: MuJoCo loads only to rebuild
 
     return _rebuild(out, quick=quick, log=log)

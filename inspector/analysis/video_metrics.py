@@ -1,0 +1,130 @@
+"""Imagined vs GT video, compared frame pair by frame pair while both clips stream.
+
+Only the per-frame numbers are kept: a 540-frame view costs two decoders and two frames of
+memory, whatever the clips' length or size. Several imagined clips that share one GT clip (rollouts
+of the same dataset episode, from the same start frame) are compared in one pass, so the GT
+is decoded once for all of them. The GT frame is scaled to each imagined clip's size while
+decoding (swscale, area filter), as the metric definition asks.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from ..data.video import ForwardReader, VideoClip
+from . import metrics
+
+Array = npt.NDArray[np.float64]
+Frame = npt.NDArray[np.uint8]
+
+
+@dataclass
+class VideoMetrics:
+    """Imagined vs GT frames of one view at the same times (GT resized to the imagined size).
+
+    Attributes:
+        psnr_db: (F,) per imagined frame; NaN where no GT frame exists (past the episode).
+        ssim: (F,) likewise, or None when not asked for (it costs ~10x the PSNR).
+    """
+
+    view: str
+    psnr_db: Array
+    ssim: Array | None = None
+
+    @property
+    def mean_psnr_db(self) -> float | None:
+        v = self.psnr_db[np.isfinite(self.psnr_db)]
+        return float(v.mean()) if v.size else None
+
+    def to_json(self) -> dict:
+        return {"view": self.view, "psnr_db": _floats(self.psnr_db),
+                "ssim": None if self.ssim is None else _floats(self.ssim)}
+
+    @classmethod
+    def from_json(cls, data: dict) -> VideoMetrics:
+        return cls(data["view"], _array(data["psnr_db"]), None if data.get("ssim") is None else _array(data["ssim"]))
+
+
+def _floats(a: Array) -> list[float | None]:
+    return [float(v) if np.isfinite(v) else None for v in a]
+
+
+def _array(values: list) -> Array:
+    return np.array([np.nan if v is None else v for v in values], dtype=np.float64)
+
+
+def compare_clips(view: str, imagined: Sequence[VideoClip], gt: VideoClip | None,
+                  gt_index_of: Callable[[int], int], with_ssim: bool = False,
+                  on_imagined: Callable[[int, int, Frame], None] | None = None,
+                  on_gt: Callable[[int, Frame], None] | None = None) -> list[VideoMetrics]:
+    """PSNR (and SSIM) of each imagined clip against the GT frames paired with its frames.
+
+    Args:
+        view: the camera name (for the result).
+        imagined: clips that share ``gt`` and its pairing (same start frame and timing).
+        gt: the GT clip, or None (every value NaN; ``on_imagined`` still sees every frame).
+        gt_index_of: ``gt_index_of(f)`` -> GT clip index paired with imagined frame ``f``, -1 for
+            none; non-decreasing in ``f``.
+        with_ssim: also compute SSIM.
+        on_imagined: called as ``on_imagined(clip_number, f, rgb)`` for every imagined frame.
+        on_gt: called as ``on_gt(index, rgb)`` for every GT frame of the clip, paired or not
+            (at the first imagined clip's size).
+
+    Raises:
+        InspectorError: a clip cannot be decoded (naming it).
+    """
+    streams = [_Stream(clip) for clip in imagined]
+    gt_stream = ForwardReader(gt, on_gt) if gt is not None else None
+    psnr: list[list[float]] = [[] for _ in streams]
+    ssim: list[list[float]] = [[] for _ in streams]
+    f = 0
+    while True:
+        live = [s for s in streams if s.peek() is not None]
+        if not live:
+            break
+        f = min(s.peek()[0] for s in live)  # type: ignore[index]
+        target = gt_index_of(f)
+        for b, s in enumerate(streams):
+            item = s.peek()
+            if item is None or item[0] != f:
+                continue
+            s.advance()
+            rgb = item[1]
+            if on_imagined is not None:
+                on_imagined(b, f, rgb)
+            gt_rgb = gt_stream.frame_at(target, rgb.shape[1::-1]) if gt_stream is not None and target >= 0 else None
+            _set(psnr[b], f, np.nan if gt_rgb is None else float(metrics.psnr(rgb[None], gt_rgb[None])[0]))
+            if with_ssim:
+                _set(ssim[b], f, np.nan if gt_rgb is None else float(metrics.ssim(rgb[None], gt_rgb[None])[0]))
+    if gt_stream is not None and on_gt is not None:
+        gt_stream.drain()  # the frames no imagined frame pairs with are still shown
+    return [VideoMetrics(view, np.array(p, dtype=np.float64), np.array(q, dtype=np.float64) if with_ssim else None)
+            for p, q in zip(psnr, ssim)]
+
+
+def _set(values: list[float], index: int, value: float) -> None:
+    """values[index] = value, padding a gap in the clip's numbering with NaN."""
+    values.extend([np.nan] * (index + 1 - len(values)))
+    values[index] = value
+
+
+class _Stream:
+    """An imagined clip decoded at its own size, one frame of lookahead."""
+
+    def __init__(self, clip: VideoClip) -> None:
+        self._frames: Iterator[tuple[int, Frame]] = clip.iter_frames()
+        self._next: tuple[int, Frame] | None = None
+        self._done = False
+
+    def peek(self) -> tuple[int, Frame] | None:
+        if self._next is None and not self._done:
+            self._next = next(self._frames, None)
+            self._done = self._next is None
+        return self._next
+
+    def advance(self) -> None:
+        self._next = None

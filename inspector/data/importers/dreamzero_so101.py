@@ -1,0 +1,352 @@
+"""Import DreamZero-SO101 evaluation artefacts into a native session.
+
+Source directories, found recursively under the path given::
+
+    train_rollout/<tag>/            autoregressive ("DreamGen") rollout
+      action_trace.npy              (n_chunks, 24, 6) every predicted chunk
+      state_trace.npy               (n_chunks + 1, 6); state_trace[k+1] == action_trace[k][8]
+      meta.json                     episode, prompt, episode_length, frames_per_step, ...
+      rollout_<view>.mp4            imagined video, one frame per executed step
+      gt_<view>.mp4                 the real episode's video from its first frame
+    <any>/<tag>/                    single chunk
+      meta.json                     actions_pred, actions_gt (24, 6), state_in | state, frame_in_ep
+      pred_<view>.mp4 | predicted_video.mp4 (2x2 mosaic [front|top; gripper|black], 640x352)
+      gt_<view>.mp4   | gt_future.mp4       (the front camera alone, 640x480 resized to 640x352:
+                                             these samples have GT video of the front view only)
+
+Values are the model's raw outputs (arm degrees, gripper 0..100) and are kept as they are:
+joint-limit violations are findings, not something to clamp away. The metas' own metrics are
+kept as the source's figures (``extra.reference_metrics``), with a note where one is not what its
+name suggests (``extra.reference_notes``): a mosaic sample's ``video_psnr_db`` compared the whole
+mosaic with the single front view.
+
+A rollout's tag is its directory name made into a valid tag (ASCII letters, digits, ``_.-``, at
+most 128 characters); the directory's own name is kept in ``extra.source.name``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+import tempfile
+import unicodedata
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...errors import InspectorError, require
+from ...units import JOINT_NAMES, Units
+from ..lerobot_dataset import LeRobotDataset, find_dataset
+from ..session import SessionWriter, check_values, load_array, read_json_object
+from ..video import decode
+
+MOSAIC_VIEWS = (("front", 0, 0), ("top", 0, 1), ("gripper", 1, 0))  # (view, row, col) of the 2x2
+PRED_MOSAIC = "predicted_video.mp4"
+GT_FRONT_ONLY = "gt_future.mp4"  # beside a mosaic: the front camera alone, not a mosaic
+MOSAIC_PSNR_NOTE = ("compared the whole 2x2 mosaic (front, top, gripper, black) with the front camera "
+                    "alone; not a per-view PSNR")
+MAX_TAG_CHARS = 128
+ROLLOUT_VIEW_PREFIX = "rollout_"
+REFERENCE_FIELDS = ("action_rmse_deg", "action_mse_deg2", "per_joint_rmse", "per_step_mse",
+                    "video_psnr_db", "video_pixel_mse", "mean_drift_deg", "final_drift_deg")
+
+
+@dataclass
+class SourceDir:
+    path: Path
+    kind: str  # "autoregressive" | "single_chunk"
+
+
+def find_sources(src: str | Path) -> list[SourceDir]:
+    """Every DreamZero-SO101 rollout directory at or under ``src``, sorted by path."""
+    src = Path(src)
+    if not src.exists():
+        raise InspectorError(src, "not found")
+    candidates = [src] if src.is_dir() else []
+    candidates += sorted(p for p in src.rglob("*") if p.is_dir()) if src.is_dir() else []
+    found = [s for s in (_classify(p) for p in candidates) if s is not None]
+    if not found:
+        raise InspectorError(src, "no DreamZero-SO101 rollout found (expected action_trace.npy + "
+                                  "meta.json, or meta.json with actions_pred/actions_gt)")
+    return found
+
+
+def _classify(path: Path) -> SourceDir | None:
+    if (path / "action_trace.npy").is_file():
+        return SourceDir(path, "autoregressive")
+    meta = path / "meta.json"
+    if meta.is_file():
+        try:
+            data = json.loads(meta.read_text())
+        except (ValueError, RecursionError):
+            # looks like ours only by name: let the importer report it properly
+            return SourceDir(path, "single_chunk")
+        if isinstance(data, dict) and "actions_pred" in data:
+            return SourceDir(path, "single_chunk")
+    return None
+
+
+def import_dreamzero(
+    src: str | Path,
+    dest: str | Path,
+    *,
+    dataset: str | Path | None = None,
+    episode: int | None = None,
+    overwrite: bool = False,
+    log: Callable[[str], None] = print,
+) -> Path:
+    """Import every rollout under ``src`` into a new session at ``dest``.
+
+    Args:
+        src: a rollout directory or any parent of several.
+        dest: the session directory to create (appears only when the import succeeded).
+        dataset: optional LeRobot dataset holding the GT episode; its actions become the
+            rollouts' GT joints.
+        episode: episode index in ``dataset`` (default: each rollout's own ``episode``).
+        log: receives one summary line per rollout.
+
+    Returns:
+        The session directory.
+    """
+    sources = find_sources(src)
+    src = Path(src)
+    ds = None
+    if dataset is not None:
+
+        ds = LeRobotDataset(find_dataset(dataset))
+    units = ds.units if ds is not None else Units("degrees")
+    with SessionWriter.create(dest, name=Path(dest).name, units=units,
+                              model={"name": "DreamZero-SO101"},
+                              dataset=str(Path(ds.root).resolve()) if ds is not None else None,
+                              overwrite=overwrite) as writer:
+        used: set[str] = set()
+        for source in sources:
+            tag = _unique_tag(source.path, src, used)
+            args = _autoregressive(source.path) if source.kind == "autoregressive" else _single_chunk(source.path)
+            if ds is not None:
+                _attach_dataset_gt(args, ds, episode, source.path)
+            writer.add_rollout(tag, **args)
+            log(_summary(tag, args))
+    return Path(dest)
+
+
+def load_in_memory(src: str | Path, **kwargs: Any) -> tuple[Path, tempfile.TemporaryDirectory]:
+    """Import into a temporary session (for ``report``/``serve``/``export`` on a raw source dir).
+
+    Returns:
+        (session_path, handle): keep ``handle`` alive as long as the session is used.
+    """
+    handle = tempfile.TemporaryDirectory(prefix="inspector-session-")
+    dest = Path(handle.name) / Path(src).resolve().name
+    try:
+        import_dreamzero(src, dest, log=lambda _: None, **kwargs)
+    except BaseException:
+        handle.cleanup()  # a failed import leaves no temporary directory behind
+        raise
+    return dest, handle
+
+
+# ----------------------------------------------------------------------------------------------
+
+
+def _autoregressive(path: Path) -> dict[str, Any]:
+    meta_path = path / "meta.json"
+    meta = read_json_object(meta_path)
+    actions = load_array(path / "action_trace.npy", ("n_chunks", "horizon", len(JOINT_NAMES)))
+    n_chunks, horizon, _ = actions.shape
+    require(n_chunks >= 1, path / "action_trace.npy", "no chunks (shape[0] == 0)")
+    states = None
+    if (path / "state_trace.npy").exists():
+        states = load_array(path / "state_trace.npy", (n_chunks + 1, len(JOINT_NAMES)))
+    executed = _int_field(meta, "frames_per_step", meta_path, default=9)
+    require(1 <= executed <= horizon, meta_path,
+            f"frames_per_step: {executed} must lie in 1..{horizon} (the chunk horizon)")
+    chained = None
+    if states is not None:
+        # each chunk starts where the previous one's last executed action left the arm
+        chained = bool(np.allclose(states[1:], actions[:, executed - 1], atol=1e-6))
+    views = _views(path, ROLLOUT_VIEW_PREFIX)
+    gt_views = _views(path, "gt_")
+    episode_length = _length_field(meta, meta_path)
+    return dict(
+        kind="autoregressive",
+        actions=actions,
+        states=states,
+        prompt=_str_field(meta, "prompt", meta_path),
+        episode_index=_int_field(meta, "episode", meta_path, default=None),
+        start_frame=_int_field(meta, "start_frame", meta_path, default=0),
+        executed_per_chunk=executed,
+        frames_per_chunk=executed,
+        videos={v: path / f"{ROLLOUT_VIEW_PREFIX}{v}.mp4" for v in views},
+        gt_videos={v: path / f"gt_{v}.mp4" for v in gt_views},
+        gt_episode_length=episode_length,
+        extra=_extra(meta, path, chained_states=chained,
+                     initial_state=meta.get("initial_state", states[0].tolist() if states is not None else None)),
+    )
+
+
+def _single_chunk(path: Path) -> dict[str, Any]:
+    meta_path = path / "meta.json"
+    meta = read_json_object(meta_path)
+    pred = _matrix_field(meta, "actions_pred", meta_path)
+    gt = _matrix_field(meta, "actions_gt", meta_path) if "actions_gt" in meta else None
+    if gt is not None:
+        require(gt.shape == pred.shape, meta_path,
+                f"actions_gt: shape {gt.shape} differs from actions_pred {pred.shape}")
+    state_in = meta.get("state_in", meta.get("state"))
+    videos = _split_views(path, "pred_", PRED_MOSAIC)
+    gt_views = _views(path, "gt_", GT_FRONT_ONLY)
+    gt_videos = {v: path / f"gt_{v}.mp4" for v in gt_views}
+    if not gt_videos and (path / GT_FRONT_ONLY).is_file():
+        gt_videos = {"front": path / GT_FRONT_ONLY}
+    notes = {}
+    if (path / PRED_MOSAIC).is_file() and (path / GT_FRONT_ONLY).is_file() and "video_psnr_db" in meta:
+        notes["video_psnr_db"] = MOSAIC_PSNR_NOTE
+    executed = min(9, pred.shape[0])
+    frames = _int_field(meta, "predicted_frames", meta_path, default=9)
+    require(frames >= 1, meta_path, f"predicted_frames: must be >= 1, found {frames}")
+    return dict(
+        kind="single_chunk",
+        actions=pred[None],
+        prompt=_str_field(meta, "prompt", meta_path),
+        episode_index=_int_field(meta, "episode", meta_path, default=None),
+        start_frame=_int_field(meta, "frame_in_ep", meta_path, default=0),
+        executed_per_chunk=executed,
+        frames_per_chunk=frames,
+        gt_actions=gt,
+        videos=videos,
+        gt_videos=gt_videos,
+        gt_episode_length=_length_field(meta, meta_path),
+        extra=_extra(meta, path, initial_state=state_in, reference_notes=notes or None),
+    )
+
+
+def _views(path: Path, prefix: str, mosaic_name: str = "") -> list[str]:
+    """View names of ``<prefix><view>.mp4`` files (display/slow/full variants and mosaics are not views)."""
+    views = []
+    for f in sorted(path.glob(f"{prefix}*.mp4")):
+        view = f.stem[len(prefix):]
+        if view and "_" not in view and f.name != mosaic_name:
+            views.append(view)
+    return views
+
+
+def _split_views(path: Path, prefix: str, mosaic_name: str) -> dict[str, Any]:
+    """Per-view clips: the ``<prefix><view>.mp4`` files, else the 2x2 mosaic cut into views
+    (paths, or frames for the cut views)."""
+    views = _views(path, prefix, mosaic_name)
+    if views:
+        return {v: path / f"{prefix}{v}.mp4" for v in views}
+    mosaic = path / mosaic_name
+    if not mosaic.is_file():
+        return {}
+    frames, _ = decode(mosaic)
+    h, w = frames.shape[1] // 2, frames.shape[2] // 2
+    out = {}
+    for view, row, col in MOSAIC_VIEWS:
+        out[view] = frames[:, row * h:(row + 1) * h, col * w:(col + 1) * w]
+    return out
+
+
+def _attach_dataset_gt(args: dict[str, Any], ds: Any, episode: int | None, path: Path) -> None:
+    """Take GT joints (and length) from the dataset episode the rollout started in."""
+    index = episode if episode is not None else args["episode_index"]
+    if index is None:
+        raise InspectorError(path / "meta.json", "episode: not given; pass --episode N with --dataset")
+    ep = ds.episode(index)
+    start = args["start_frame"]
+    require(start < ep.length, path / "meta.json",
+            f"start frame {start} lies beyond episode {index} ({ep.length} frames)")
+    args["episode_index"] = index
+    args["gt_actions"] = ep.action[start:]
+    args["gt_episode_length"] = ep.length
+
+
+def _extra(meta: dict[str, Any], path: Path, **more: Any) -> dict[str, Any]:
+    reference = {k: meta[k] for k in REFERENCE_FIELDS if k in meta}
+    info = {k: meta[k] for k in ("training_task", "prompt_kind", "episode_length", "n_steps",
+                                 "total_imagined_frames", "final_imagined_state") if k in meta}
+    return {"source": {"format": "dreamzero_so101", "path": str(path.resolve()), "name": path.resolve().name,
+                       **info},
+            "reference_metrics": reference, **{k: v for k, v in more.items() if v is not None}}
+
+
+def _str_field(meta: dict[str, Any], key: str, path: Path) -> str:
+    value = meta.get(key, "")
+    require(isinstance(value, str), path, f"{key}: expected a string, found {value!r}")
+    return value
+
+
+def _int_field(meta: dict[str, Any], key: str, path: Path, default: Any) -> Any:
+    value = meta.get(key, default)
+    require(value is default or (isinstance(value, int) and not isinstance(value, bool) and value >= 0),
+            path, f"{key}: expected a non-negative integer, found {value!r}")
+    return value
+
+
+def _matrix_field(meta: dict[str, Any], key: str, path: Path) -> np.ndarray:
+    require(key in meta, path, f"missing field {key!r}")
+    try:
+        arr = np.asarray(meta[key], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InspectorError(path, f"{key}: expected a (horizon, 6) list of numbers") from None
+    except OverflowError:  # an integer past float64's range (JSON integers have no limit)
+        raise InspectorError(path, f"{key}: a number too large for a 64-bit float") from None
+    require(arr.ndim == 2 and arr.shape[1] == len(JOINT_NAMES) and arr.shape[0] >= 1, path,
+            f"{key}: expected shape (horizon, {len(JOINT_NAMES)}), found {arr.shape}")
+    check_values(arr, path, f"{key}: ")
+    return arr
+
+
+def _length_field(meta: dict[str, Any], path: Path) -> int | None:
+    """``episode_length``: absent/null, or a positive integer."""
+    value = meta.get("episode_length")
+    require(value is None or (isinstance(value, int) and not isinstance(value, bool) and value > 0),
+            path, f"episode_length: expected a positive integer, found {value!r}")
+    return value
+
+
+def _unique_tag(path: Path, root: Path, used: set[str]) -> str:
+    """A valid rollout tag for a source directory, unique among ``used`` (which it joins)."""
+    base = tag_from_name(path.name if path != root else root.resolve().name)
+    tag, n = base, 2
+    while tag in used:
+        parent = tag_from_name(path.parent.name) if path.parent.name else ""
+        tag = _join_tag(parent, base) if n == 2 and parent else _join_tag(base, str(n))
+        n += 1
+    used.add(tag)
+    return tag
+
+
+def tag_from_name(name: str) -> str:
+    """A valid tag (ASCII letters, digits, ``_.-``, 1-128 characters) made from a directory name:
+    accents dropped (``épisode`` -> ``episode``), other characters -> ``_``, a name too long cut
+    and ended with a hash of the whole name (so two long names stay apart)."""
+    ascii_name = unicodedata.normalize("NFKD", name).encode("ascii", "ignore").decode("ascii")
+    tag = re.sub(r"[^A-Za-z0-9_.-]+", "_", ascii_name).lstrip("._-").rstrip("_")
+    if len(tag) > MAX_TAG_CHARS or not tag:  # too long, or nothing ASCII in it
+        digest = hashlib.sha1(name.encode("utf-8", "surrogateescape")).hexdigest()[:8]
+        tag = _join_tag(tag, digest)
+    return tag
+
+
+def _join_tag(head: str, tail: str) -> str:
+    """``head_tail`` within the tag length, cutting ``head``."""
+    head = head[: MAX_TAG_CHARS - len(tail) - 1].rstrip("._-")
+    return f"{head}_{tail}" if head else tail
+
+
+def _summary(tag: str, args: dict[str, Any]) -> str:
+    actions = args["actions"]
+    views = ",".join(sorted(args.get("videos") or {})) or "none"
+    gt = "GT joints" if args.get("gt_actions") is not None else "no GT joints"
+    rmse = ""
+    if args.get("gt_actions") is not None and args["kind"] == "single_chunk":
+        diff = actions[0] - args["gt_actions"][: actions.shape[1]]
+        rmse = f", RMSE {np.sqrt(np.mean(diff ** 2)):.3f} deg"
+    return (f"{tag}: {args['kind']}, {actions.shape[0]} chunk(s) x {actions.shape[1]} steps, "
+            f"views {views}, {gt}{rmse}, prompt {args['prompt']!r}")

@@ -1,0 +1,181 @@
+"""Open whatever a user points at: a session, one rollout of it, or raw DreamZero-SO101 output.
+
+``report``, ``serve`` and ``export`` all take such paths; they share this one function so a path
+means the same thing everywhere. Raw model output is imported into a temporary session that lives
+as long as the returned :class:`Sources`.
+
+``open_sources(..., confine=True)`` (what ``inspector serve`` uses) also refuses, before reading
+them, ``session.json`` and every rollout whose directory or any file in it resolves (through
+symbolic links) outside its session's directory: see :func:`check_confined`.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import InspectorError
+from .importers.dreamzero_so101 import find_sources, load_in_memory
+from .lerobot_dataset import INFO_PATH, REPO_ID, find_dataset, is_lerobot_dataset, open_dataset
+from .session import Rollout, Session, is_rollout, is_session, open_session
+
+BUNDLED_DEMO = Path(__file__).resolve().parents[2] / "sessions" / "demo"
+
+
+@dataclass
+class Sources:
+    """Sessions (and LeRobot datasets) opened from user paths. ``roots`` are the directories the
+    app may read under."""
+
+    sessions: list[Session] = field(default_factory=list)
+    roots: list[Path] = field(default_factory=list)
+    datasets: list = field(default_factory=list)  # LeRobotDataset, their episodes browsed on their own
+    _temps: list[tempfile.TemporaryDirectory] = field(default_factory=list, repr=False)
+
+    def rollouts(self) -> Iterator[tuple[Session, Rollout]]:
+        for session in self.sessions:
+            for tag in sorted(session.rollouts):
+                yield session, session.rollouts[tag]
+
+    def serves(self, path: str | Path) -> bool:
+        """True when ``path`` resolves to one of ``roots`` or to something under one."""
+        return _under(Path(path).resolve(), self.roots)
+
+    def close(self) -> None:
+        for t in self._temps:
+            t.cleanup()
+        self._temps.clear()
+
+
+def open_sources(paths: Sequence[str | Path], dataset: str | Path | None = None,
+                 confine: bool = False, lazy: bool = False, datasets: bool = False) -> Sources:
+    """Open each path as a session (a rollout path opens its session filtered to that rollout).
+
+    A session named more than once (itself, or several of its rollouts) is opened once, holding
+    every rollout named.
+
+    Args:
+        paths: sessions, rollout directories, or DreamZero-SO101 source directories.
+        dataset: a LeRobot dataset to take GT from when a session names none.
+        confine: refuse (as rollout errors, before reading them) rollouts whose directory or any
+            file in it resolves outside the session directory; the app serves with this on.
+        lazy: read rollouts' arrays on first use (``open_session(..., lazy=True)``).
+        datasets: also take LeRobot datasets (a directory, or ``org/name`` in the local LeRobot
+            cache) into ``Sources.datasets`` (only their metadata is read).
+
+    Raises:
+        InspectorError: a path is missing or is none of the above (or, confined, its
+            ``session.json`` resolves outside the session directory).
+    """
+    out = Sources()
+    try:
+        for raw in paths:
+            if datasets and _open_dataset(out, raw, confine):
+                continue
+            _open_one(out, raw, dataset, confine, lazy)
+    except BaseException:
+        out.close()  # temporary sessions of the paths already opened
+        raise
+    return out
+
+
+def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine: bool = False,
+              lazy: bool = False) -> None:
+    """Open one path of :func:`open_sources` into ``out``."""
+    path = Path(os.path.expanduser(raw))  # '~nosuchuser' stays as it is: not found
+    if not path.exists():
+        raise InspectorError(path, "not found")
+    path = path.resolve()
+
+    def opened(root: Path) -> Session:
+        root = root.resolve()
+        return open_session(root, check=(lambda p: check_confined(p, [root])) if confine else None, lazy=lazy)
+
+    if is_session(path):
+        session = opened(path)
+    elif is_rollout(path) and is_session(path.parent.parent):
+        session = opened(path.parent.parent)
+        keep = path.name
+        session.rollouts = {k: v for k, v in session.rollouts.items() if k == keep}
+        session.errors = {k: v for k, v in session.errors.items() if k == keep}
+    else:
+
+        find_sources(path)  # raises a clear error when there is nothing to import
+        session_path, handle = load_in_memory(path, dataset=dataset)
+        out._temps.append(handle)
+        session = opened(session_path)
+        out.roots.append(Path(handle.name))
+    if dataset is not None and session.dataset_root is None:
+
+        session.gt_source["dataset"] = str(find_dataset(dataset, download=True))
+    same = next((s for s in out.sessions if s.root.resolve() == session.root.resolve()), None)
+    if same is not None:  # named twice (or two of its rollouts named): one session, their union
+        same.rollouts.update(session.rollouts)
+        same.errors.update(session.errors)
+        return
+    out.sessions.append(session)
+    out.roots.append(session.root.resolve())
+
+
+def _open_dataset(out: Sources, raw: str | Path, confine: bool) -> bool:
+    """Open ``raw`` into ``out.datasets`` when it names a LeRobot dataset; False when it does not."""
+    path = Path(os.path.expanduser(raw))
+    if path.exists():
+        if not (is_lerobot_dataset(path) or ((path / INFO_PATH).is_file() and not is_session(path))):
+            return False
+        root = path.resolve()
+    elif REPO_ID.match(str(raw)):
+        try:
+            root = find_dataset(str(raw), download=True).resolve()
+        except InspectorError as exc:  # neither a path nor a dataset here: say how to get one
+            raise InspectorError(path, f"not found: no such path, and {exc.what}") from None
+    else:
+        return False
+    if confine:
+        check_confined(root / INFO_PATH, [root])
+    ds = open_dataset(root)
+    _ = ds.episodes  # the index: read now, so a broken one is refused now
+    if all(d.root != ds.root for d in out.datasets):
+        out.datasets.append(ds)
+        out.roots.append(root)
+    return True
+
+
+def check_confined(path: str | Path, roots: Iterable[str | Path]) -> None:
+    """Refuse ``path`` when it, or anything under it, resolves outside every one of ``roots``.
+
+    Every entry is resolved through its symbolic links, and the walk follows the links that stay
+    inside (each directory once), so no file reachable under ``path`` leads elsewhere. Nothing is
+    read but directory listings.
+
+    Raises:
+        InspectorError: naming the first entry at fault, e.g. ``rollouts/ep0/video/front.mp4:
+            resolves outside the served roots (to /elsewhere/front.mp4) ...``.
+    """
+    allowed = [Path(r).resolve() for r in roots]
+    seen: set[Path] = set()
+    stack = [Path(path)]
+    while stack:
+        entry = stack.pop()
+        try:
+            target = entry.resolve()
+        except (RuntimeError, OSError):  # a link loop (RuntimeError before Python 3.13): leads nowhere
+            continue
+        if not _under(target, allowed):
+            raise InspectorError(entry, f"resolves outside the served roots (to {target}); only files under "
+                                        f"{', '.join(map(str, allowed))} are served, so it is not read")
+        if target in seen or not target.is_dir():
+            continue
+        seen.add(target)
+        try:
+            names = sorted(os.listdir(entry))
+        except OSError:
+            continue  # unreadable: whoever reads it reports that
+        stack.extend(entry / name for name in reversed(names))
+
+
+def _under(path: Path, roots: Iterable[Path]) -> bool:
+    return any(path == r or path.is_relative_to(r) for r in roots)

@@ -1,0 +1,27 @@
+"""Rerun ``.rrd`` recordings: the recording (``recording``, with ``arms``, ``video``, ``series``,
+``description`` and the blueprint in ``layout``), several written by workers (``jobs``), and the
+``inspector export`` command (``command``).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from .._lazy import attach
+
+__getattr__, __dir__, __all__ = attach(__name__, {
+    "write_recording": ".recording",
+    "export_rollout": ".recording",
+    "export_cli": ".command",
+    "ExportJob": ".jobs",
+    "ExportOutcome": ".jobs",
+    "run_export_jobs": ".jobs",
+})
+
+if TYPE_CHECKING:
+    from .command import export_cli as export_cli
+    from .jobs import ExportJob as ExportJob
+    from .jobs import ExportOutcome as ExportOutcome
+    from .jobs import run_export_jobs as run_export_jobs
+    from .recording import export_rollout as export_rollout
+    from .recording import write_recording as write_recording

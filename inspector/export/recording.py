@@ -1,0 +1,230 @@
+"""Rerun ``.rrd`` export of a rollout: the same timeline the app shows, as a self-explaining file.
+
+Usage::
+
+    from inspector.export.recording import write_recording
+    from inspector.analysis.timeline import build_timeline
+
+    write_recording(build_timeline(rollout), "ep000.rrd", views=["front"],
+                    progress=lambda fraction, message: print(f"{fraction:.0%} {message}"))
+
+A recording holds the timelines ``time`` (s), ``frame`` (imagined frame) and ``chunk``; the GT and
+predicted arms from our URDF (:mod:`inspector.export.arms`); the imagined and GT videos as
+H.264 assets with frame references (:mod:`inspector.export.video`); every metric as a named
+series with markers at chunk starts, the episode's end and limit violations
+(:mod:`inspector.export.series`); a markdown description (:mod:`inspector.export.description`);
+and one default blueprint (:func:`inspector.export.layout.build_blueprint`). Files are written to
+a temporary sibling and renamed into place, so a failed export never leaves half a file.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import tempfile
+import uuid
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import cast
+
+import numpy as np
+import rerun as rr
+
+from ..analysis.timeline import RolloutTimeline, build_timeline
+from ..analysis.video_metrics import VideoMetrics
+from ..cache import rollout_key
+from ..data.session import ROLLOUT_FILE
+from ..errors import InspectorError
+from ..robot.description import VIEW_DIRECTION, bounding_sphere
+from ..robot.kinematics import kinematics
+from . import layout as L
+from .arms import log_arms, prepare_meshes
+from .description import describe
+from .series import log_markers, log_metric_series, log_psnr
+from .video import Progress, frame_indexes, log_view
+
+RRD_SUFFIX = ".rrd"
+
+# Share of the progress bar each stage takes (decoding for PSNR dominates a cold export).
+_VIDEO_METRICS = (0.02, 0.70)
+_VIDEO_ASSETS = (0.85, 0.99)
+
+
+def write_recording(timeline: RolloutTimeline, path: str | Path, views: Sequence[str] | None = None,
+                    progress: Callable[[float, str], None] | None = None) -> Path:
+    """Write ``timeline`` as a Rerun recording at ``path`` (atomically).
+
+    Args:
+        timeline: the rollout's computed timeline (:func:`inspector.analysis.timeline.build_timeline`).
+        path: the ``.rrd`` file to write; its directory is created if needed.
+        views: camera views to include (default: every imagined and GT view).
+        progress: ``progress(fraction, message)``, called as the export advances (0 -> 1).
+
+    Returns:
+        ``path``.
+
+    Raises:
+        InspectorError: a requested view does not exist, or a video is unreadable.
+    """
+    path = Path(path)
+    report = progress or (lambda fraction, message: None)
+    views = select_views(timeline, views)
+    report(0.0, "video metrics")
+    with ThreadPoolExecutor(max_workers=1) as meshes:
+        meshes_ready = meshes.submit(prepare_meshes)
+        psnr = compute_psnr(timeline, views, report)
+        meshes_ready.result()  # re-raises what went wrong there
+    contents = L.Contents(
+        views={v: (v in timeline.rollout.views, v in timeline.gt.views) for v in views},
+        gt_joints=timeline.has_gt_joints,
+        psnr_views=[v for v, series in psnr.items() if np.isfinite(series).any()],
+        pred_name=timeline.labels.pred, gt_name=timeline.labels.gt, chunks=timeline.n_chunks > 1,
+        eye=eye_fitting(timeline),
+    )
+    # Encoded in memory (a few MB) and written by us: a write error (disk full, permission) is
+    # then an ordinary OSError naming the file, not a log line from rerun's writer thread.
+    rec = rr.RecordingStream(application_id=application_id(timeline.tag))
+    try:
+        stream = rec.binary_stream()  # type: ignore[misc]  # rerun binds a module function as this method
+        # Active, not only default: in this stream the layout follows the recording's first
+        # message, and a viewer that has already laid the recording out by heuristics keeps that
+        # layout over a mere default (Rerun's web viewer does).
+        rec.send_blueprint(L.build_blueprint(contents), make_active=True, make_default=True)
+        session = timeline.rollout.session
+        rec.send_recording_name(f"{session.name}/{timeline.tag}" if session is not None else timeline.tag)
+        _log_recording(rec, timeline, views, psnr, report)
+        data = stream.read() or b""
+    finally:
+        rec.disconnect()
+    write_file_atomic(path, data)
+    report(1.0, "done")
+    return path
+
+
+def eye_fitting(tl: RolloutTimeline) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """The 3D view's (position, look target): every tool path and every chunk's horizon in view
+    (a wandering prediction used to run off the top), seen from the front right, above."""
+    points = [tl.ee_pred, kinematics().gripper_positions(tl.chunks.reshape(-1, tl.chunks.shape[-1]), tl.units),
+              np.zeros((1, 3)), np.array([[0.0, 0.0, 0.3]])]  # the base, and the arm's own height
+    if tl.ee_gt is not None:
+        points.append(tl.ee_gt)
+    centre, radius = bounding_sphere(np.concatenate(points))
+    distance = radius / np.tan(np.radians(55) / 2) * 1.1  # within the viewer's default field of view
+    eye = centre + np.asarray(VIEW_DIRECTION) * distance
+    return (tuple(float(v) for v in eye), tuple(float(v) for v in centre))  # type: ignore[return-value]
+
+
+def write_file_atomic(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary sibling, so that ``path`` is either the old
+    file or the complete new one; a write error leaves no temporary file.
+
+    Raises:
+        InspectorError: the file cannot be written (no space left, permission denied, ...).
+    """
+    tmp = path.with_name(f".{path.name[:64]}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(tmp, "xb") as fh:  # the usual umask-derived mode, unlike mkstemp's 0600
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise InspectorError(exc.filename if exc.filename and exc.filename != str(tmp) else path,
+                             f"cannot write the recording ({exc.strerror or exc})") from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def _log_recording(rec: rr.RecordingStream, tl: RolloutTimeline, views: list[str],
+                   psnr: dict[str, np.ndarray], report: Callable[[float, str], None]) -> None:
+    """Orchestrates the ``log_*`` functions; each takes the stream and the timeline."""
+    def steps_indexes(steps: np.ndarray) -> list[rr.TimeColumn]:
+        return L.step_indexes(tl, steps)
+
+    def frames_indexes(frames: np.ndarray) -> list[rr.TimeColumn]:
+        return frame_indexes(tl, frames)
+
+    report(_VIDEO_METRICS[1], "arms")
+    mean_psnr = {v: (float(np.nanmean(s)) if np.isfinite(s).any() else None) for v, s in psnr.items()}
+    rec.log(L.DESCRIPTION, rr.TextDocument(describe(tl, mean_psnr), media_type="text/markdown"),
+            static=True)
+    log_arms(rec, tl, steps_indexes(np.arange(tl.n_steps)))
+    report(0.80, "metric series")
+    log_metric_series(rec, tl, steps_indexes)
+    log_markers(rec, tl, steps_indexes)
+    for i, (view, series) in enumerate(psnr.items()):
+        log_psnr(rec, tl, view, series, frames_indexes, L.VIEW_RGBA[i % len(L.VIEW_RGBA)])
+    lo, hi = _VIDEO_ASSETS
+    with tempfile.TemporaryDirectory(prefix="inspector-video-") as tmp:
+        for i, view in enumerate(views):
+            start, span = lo + (hi - lo) * i / len(views), (hi - lo) / len(views)
+            report(start, f"video {view}")
+            log_view(rec, tl, view, Path(tmp),
+                     progress=cast(Progress, lambda f, v=view, s=start: report(s + span * f, f"encoding GT video {v}")))
+
+
+def application_id(tag: str) -> str:
+    """Rerun application id of a rollout's recording: one per rollout, so each file opens with
+    its own default blueprint (the viewer keeps one active blueprint per application)."""
+    return "inspector_" + re.sub(r"[^A-Za-z0-9_-]", "_", tag)
+
+
+def select_views(tl: RolloutTimeline, views: Sequence[str] | None) -> list[str]:
+    """The views to export: ``views`` checked against the rollout's (default: all of them)."""
+    available = list(tl.rollout.views) + [v for v in tl.gt.views if v not in tl.rollout.views]
+    if views is None:
+        return available
+    missing = [v for v in views if v not in available]
+    if missing:
+        raise InspectorError(tl.rollout.root / ROLLOUT_FILE,
+                             f"no view {missing[0]!r} in rollout {tl.tag!r}; views: {available}")
+    return list(dict.fromkeys(views))
+
+
+def compute_psnr(tl: RolloutTimeline, views: Sequence[str],
+                 report: Callable[[float, str], None]) -> dict[str, np.ndarray]:
+    """(F,) PSNR [dB] per view with imagined and GT frames (the timeline's own, cached metric).
+
+    A timeline that already holds the metric (the app's) returns at once.
+    """
+    lo, hi = _VIDEO_METRICS
+    metrics_by_view = tl.all_video_metrics(list(views), lambda f, msg: report(lo + (hi - lo) * f, msg))
+    return {view: vm.psnr_db for view, vm in metrics_by_view.items()}
+
+
+@contextlib.contextmanager
+def cached_video_metrics(tl: RolloutTimeline, cache) -> Iterator[None]:
+    """Give ``tl`` the video metrics the metrics cache holds for it; keep the ones computed
+    meanwhile there (a rollout the app or ``report`` has seen exports without decoding)."""
+    key = rollout_key(tl.rollout, tl.gt, tl.limit_margin_deg)
+    record = cache.get(key) or {}
+    known = dict(record.get("video") or {})
+    for data in known.values():
+        tl.set_video_metrics(VideoMetrics.from_json(data))
+    yield
+    new = {v: vm.to_json() for v, vm in tl.known_video_metrics().items() if v not in known}
+    if new:
+        cache.put(key, {"row": record.get("row"), "video": {**known, **new}})
+
+
+def export_rollout(rollout, dest: Path, views: Sequence[str] | None, limit_margin_deg: float, cache,
+                   progress: Callable[[float, str], None] | None = None) -> Path:
+    """Write one rollout's recording at ``dest``: its timeline, with video metrics through
+    ``cache`` (:class:`inspector.cache.MetricsCache`); of ``views``, those it has (default: all)."""
+    tl = build_timeline(rollout, limit_margin_deg=limit_margin_deg)
+    rollout_views = None if views is None else [v for v in views if v in tl.rollout.views or v in tl.gt.views]
+    with cached_video_metrics(tl, cache):
+        return write_recording(tl, dest, views=rollout_views, progress=progress)
+
+
+def format_size(n_bytes: int) -> str:
+    """``2_900_000`` -> ``"2.9 MB"`` (decimal units)."""
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n_bytes >= scale:
+            return f"{n_bytes / scale:.1f} {unit}"
+    return f"{n_bytes} B"

@@ -1,0 +1,214 @@
+"""``--ray``: jobs as Ray tasks, on a local Ray instance or on an existing cluster.
+
+:meth:`RayWorkers.imap` runs any picklable function over jobs; the report and the export hand it
+the very jobs their local paths run (:func:`inspector.report.tasks.run_tasks_on_ray`,
+:func:`inspector.export.jobs.export_on_ray`), so results are the same by construction; Ray only
+decides where they run. Jobs name rollouts by
+path and carry no data: every worker reads them from disk, so sessions and their GT datasets must
+sit on storage each node mounts at the same path. Only summary rows (or the path of a written
+recording) come back to the driver, as each task finishes.
+
+Addresses, as Ray names them: ``local`` starts a Ray instance of ``jobs`` CPUs in this process for
+the run (no dashboard, no usage statistics) and stops it at the end; ``auto`` joins the cluster
+this machine belongs to; ``HOST:PORT`` (the head's GCS) or ``ray://HOST:PORT`` (Ray Client) join
+that cluster. An address is probed before Ray is asked, so one that nothing answers at is a
+one-line error within seconds rather than Ray's minutes of retries. When this process is already
+connected (``ray.init`` called by a notebook or a test), that connection is used and left open.
+
+Ray is an optional dependency: ``pip install 'inspector[ray]'``.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+import socket
+import sys
+import warnings
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager, suppress
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+from ..cache import ENV_DIR as CACHE_ENV_DIR
+from ..errors import InspectorError
+from .pool import default_jobs
+
+LOCAL = "local"
+INSTALL_HINT = "install with pip install 'inspector[ray]'"
+# How long an address may take to accept a TCP connection before it counts as unreachable [s].
+PROBE_TIMEOUT_S = 5.0
+_ADDRESS = re.compile(r"(?:ray://)?(?P<host>\[[^\]]+\]|[^\s:/\[\]]+):(?P<port>\d{1,5})")
+
+J = TypeVar("J")
+R = TypeVar("R")
+
+
+def import_ray() -> Any:
+    """The ``ray`` module, or an :class:`InspectorError` that says how to install it."""
+    try:
+        import ray
+    except ImportError as exc:
+        raise InspectorError("--ray", f"Ray is not installed ({exc}); {INSTALL_HINT}") from None
+    return ray
+
+
+@dataclass
+class RayWorkers:
+    """A connection to a Ray cluster, for :func:`ray_workers`.
+
+    Attributes:
+        address: the address it was opened with.
+        cpus: the cluster's CPUs when it was joined (each task takes one).
+        max_in_flight: at most this many tasks submitted at once (None: all of them).
+    """
+
+    address: str
+    cpus: int
+    max_in_flight: int | None
+
+    def imap(self, fn: Callable[[J], R], jobs: Iterable[J]) -> Iterator[tuple[J, R | None, str | None]]:
+        """``fn(job)`` for each job as a Ray task (one CPU each), as they finish: (job, result,
+        None), or (job, None, why) when its worker or node was lost.
+
+        An exception ``fn`` raised is raised here as the local path would raise it.
+        """
+        ray = import_ray()
+        remote = ray.remote(num_cpus=1)(fn)
+        todo = iter(jobs)
+        pending: dict[Any, J] = {}
+
+        def submit() -> None:
+            while self.max_in_flight is None or len(pending) < self.max_in_flight:
+                job = next(todo, None)
+                if job is None:
+                    return
+                pending[remote.remote(job)] = job
+
+        try:
+            submit()
+            while pending:
+                ready, _ = ray.wait(list(pending), num_returns=1)
+                for ref in ready:
+                    job = pending.pop(ref)
+                    try:
+                        yield job, ray.get(ref), None
+                    except ray.exceptions.RayTaskError as exc:
+                        raise _task_failure(exc, self.address) from None
+                    except ray.exceptions.RayError as exc:  # the worker or its node died, out of memory
+                        yield job, None, _first_line(exc)
+                submit()
+        finally:
+            for ref in pending:  # stopped early (an error, Ctrl-C): the cluster need not go on
+                with suppress(Exception):  # never hide why it stopped
+                    ray.cancel(ref, force=True)
+
+
+@contextmanager
+def ray_workers(address: str, jobs: int | None = None) -> Iterator[RayWorkers]:
+    """Join (or start, for ``local``) a Ray cluster for one run; leave it at the end.
+
+    Args:
+        address: ``local``, ``auto``, ``HOST:PORT`` or ``ray://HOST:PORT`` (see the module docstring).
+        jobs: ``local``: the instance's CPUs (default: this machine's); a cluster: at most this
+            many tasks at once (default: no limit, the cluster schedules them).
+
+    Raises:
+        InspectorError: Ray is missing, the address is malformed or unreachable.
+    """
+    ray = import_ray()
+    if ray.is_initialized():  # a notebook's or a test's connection: used, and left open
+        yield RayWorkers("(connected)", _cluster_cpus(ray), jobs)
+        return
+    check_address(address)
+    local = address == LOCAL
+    cpus = jobs or default_jobs()
+    options: dict[str, Any] = {"address": address, "logging_level": logging.ERROR, "log_to_driver": True}
+    if os.environ.get(CACHE_ENV_DIR):  # a cluster's workers see the driver's cache directory
+        options["runtime_env"] = {"env_vars": {CACHE_ENV_DIR: os.environ[CACHE_ENV_DIR]}}
+    if local:
+        os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # nothing leaves the machine
+        options.update(num_cpus=cpus, include_dashboard=False)
+    try:
+        with warnings.catch_warnings():  # Ray Client warns before it raises: the error says it all
+            warnings.simplefilter("ignore")
+            ray.init(**options)
+    except (Exception, SystemExit) as exc:  # Ray exits the process when a GCS never answers
+        raise InspectorError(address, f"cannot {'start' if local else 'join'} a Ray cluster ({_first_line(exc)})") from None
+    try:
+        workers = RayWorkers(address, cpus if local else _cluster_cpus(ray), None if local else jobs)
+        print(f"inspector: Ray at {address}, {workers.cpus} CPU(s)", file=sys.stderr)
+        yield workers
+    finally:
+        ray.shutdown()
+
+
+def check_address(address: str) -> None:
+    """Refuse a malformed address, and one where nothing accepts a connection (in seconds).
+
+    Raises:
+        InspectorError: naming the address and what is wrong with it.
+    """
+    if address in (LOCAL, "auto"):
+        endpoint = _auto_endpoint() if address == "auto" else None
+    else:
+        match = _ADDRESS.fullmatch(address)
+        if match is None:
+            raise InspectorError(address, "not a Ray address; expected auto, HOST:PORT or ray://HOST:PORT "
+                                          "(with no address, --ray goes after the paths)")
+        endpoint = (match["host"].strip("[]"), int(match["port"]))
+    if endpoint is None:
+        return
+    try:
+        with socket.create_connection(endpoint, timeout=PROBE_TIMEOUT_S) as conn:
+            speaks_grpc = os.environ.get("RAY_USE_TLS", "0").lower() in ("1", "true") or _answers_http2(conn)
+    except OSError as exc:
+        raise InspectorError(address, f"cannot reach a Ray cluster there ({exc.strerror or exc})") from None
+    if not speaks_grpc:  # e.g. the dashboard's port: Ray would retry for many minutes
+        raise InspectorError(address, "answers, but not as Ray's GCS or Ray Client (both speak gRPC; by "
+                                      "default the GCS listens on port 6379, Ray Client on 10001)")
+
+
+def _answers_http2(conn: socket.socket) -> bool:
+    """True when the server opens HTTP/2 (a gRPC server's first frame is SETTINGS, type 4)."""
+    conn.sendall(b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0]))
+    head = b""
+    try:
+        while len(head) < 9:
+            more = conn.recv(9 - len(head))
+            if not more:
+                break
+            head += more
+    except TimeoutError:
+        pass
+    return len(head) == 9 and head[3] == 4
+
+
+def _auto_endpoint() -> tuple[str, int] | None:
+    """Where ``auto`` leads (``$RAY_ADDRESS``, else the cluster last started on this machine)."""
+    try:  # Ray's own lookup (private): only to probe before Ray's long retries; Ray decides
+        from ray._private.services import canonicalize_bootstrap_address
+
+        match = _ADDRESS.fullmatch(canonicalize_bootstrap_address("auto") or "")
+    except Exception:
+        return None  # none found: ray.init says so at once
+    return None if match is None else (match["host"].strip("[]"), int(match["port"]))
+
+
+def _cluster_cpus(ray: Any) -> int:
+    return max(1, int(ray.cluster_resources().get("CPU", 1)))
+
+
+def _task_failure(exc: Any, address: str) -> BaseException:
+    """What a job raised on a worker, raised here as the local path would raise it."""
+    cause = getattr(exc, "cause", None)
+    if isinstance(cause, ImportError):
+        return InspectorError(address, f"the Ray workers cannot import inspector ({cause}); install the same "
+                                       "version of inspector on every node")
+    return cause if isinstance(cause, BaseException) else exc
+
+
+def _first_line(exc: BaseException) -> str:
+    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+    return f"{type(exc).__name__}: {lines[0]}" if lines else type(exc).__name__

@@ -1,0 +1,51 @@
+"""``inspector report`` and ``compare``: tasks for workers (``tasks``), one row per rollout (``rows``),
+the report (``build``), the HTML page (``html``, ``figures``, ``svg``, ``assets/``) and two
+evaluations side by side (``compare``).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from .._lazy import attach
+
+__getattr__, __dir__, __all__ = attach(__name__, {
+    "build_report": ".build",
+    "format_report": ".build",
+    "build_comparison": ".compare",
+    "compare_reports": ".compare",
+    "format_comparison": ".compare",
+    "pair_rows": ".compare",
+    "render_report_html": ".html",
+    "write_report_html": ".html",
+    "report_figures": ".figures",
+    "rollout_summary": ".rows",
+    "episode_summary": ".rows",
+    "aggregate": ".rows",
+    "Task": ".tasks",
+    "EpisodeTask": ".tasks",
+    "Outcome": ".tasks",
+    "plan_tasks": ".tasks",
+    "run_task": ".tasks",
+    "run_tasks": ".tasks",
+})
+
+if TYPE_CHECKING:
+    from .build import build_report as build_report
+    from .build import format_report as format_report
+    from .compare import build_comparison as build_comparison
+    from .compare import compare_reports as compare_reports
+    from .compare import format_comparison as format_comparison
+    from .compare import pair_rows as pair_rows
+    from .figures import report_figures as report_figures
+    from .html import render_report_html as render_report_html
+    from .html import write_report_html as write_report_html
+    from .rows import aggregate as aggregate
+    from .rows import episode_summary as episode_summary
+    from .rows import rollout_summary as rollout_summary
+    from .tasks import EpisodeTask as EpisodeTask
+    from .tasks import Outcome as Outcome
+    from .tasks import Task as Task
+    from .tasks import plan_tasks as plan_tasks
+    from .tasks import run_task as run_task
+    from .tasks import run_tasks as run_tasks
