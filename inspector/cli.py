@@ -19,9 +19,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+import re
+import socket
 import sys
+import threading
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import NoReturn
 
 from .cache import DEFAULT_FRAME_CACHE_MB
 from .errors import InspectorError
@@ -74,6 +79,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 def _cmd_serve(args: argparse.Namespace) -> int:
     from .app import serve
 
+    check_listenable(args.host, args.port)
     serve(args.paths, host=args.host, port=args.port, share=args.share, dataset=args.dataset,
           cache_mb=args.cache_mb, use_cache=not args.no_cache, exit_when_stopped=True)
     return 0
@@ -106,24 +112,59 @@ def _version() -> str:
         return "unknown (not installed)"
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """argparse, except that a bad flag or argument is one line, as every other error is:
+    ``error: --jobs: must be at least 1 (got 0)``, exit 2 (argparse prints its usage block first)."""
+
+    def error(self, message: str) -> NoReturn:
+        match = re.fullmatch(r"argument ([^/:\s]+)(?:/\S+)?: (.*)", message, flags=re.DOTALL)
+        where, what = (match[1], match[2]) if match else (self.prog, f"{message} (see {self.prog} --help)")
+        print(f"error: {InspectorError(where, what)}", file=sys.stderr)
+        sys.exit(EXIT_BAD_INPUT)
+
+
+def _number(text: str, kind: type[int] | type[float]) -> float:
+    try:
+        value = kind(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a {'whole ' if kind is int else ''}number (got {text!r})") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number (got {text})")
+    return value
+
+
 def _positive_int(text: str) -> int:
-    value = int(text)
+    value = int(_number(text, int))
     if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, found {value}")
+        raise argparse.ArgumentTypeError(f"must be at least 1 (got {value})")
     return value
 
 
 def _positive_float(text: str) -> float:
-    value = float(text)
+    value = _number(text, float)
     if not value > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, found {text}")
+        raise argparse.ArgumentTypeError(f"must be more than 0 (got {text})")
+    return value
+
+
+def _index(text: str) -> int:
+    value = int(_number(text, int))
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be at least 0 (got {value})")
+    return value
+
+
+def _port(text: str) -> int:
+    value = int(_number(text, int))
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"must be a TCP port from 0 to 65535 (got {value}; 0 picks a free one)")
     return value
 
 
 def _margin(text: str) -> float:
-    value = float(text)
+    value = _number(text, float)
     if not (0.0 <= value < 360.0):
-        raise argparse.ArgumentTypeError(f"must be a number of degrees in [0, 360), found {text}")
+        raise argparse.ArgumentTypeError(f"must be a number of degrees in [0, 360) (got {text})")
     return value
 
 
@@ -140,8 +181,45 @@ def _ray_argument(p: argparse.ArgumentParser, what: str) -> None:
                         "the same path (needs pip install 'inspector[ray]')")
 
 
+# How long resolving --host may take before serve gives up (a resolver without network can hang) [s].
+RESOLVE_TIMEOUT_S = 4.0
+
+
+def check_listenable(host: str, port: int) -> None:
+    """Refuse, in seconds and in one line, a host that does not resolve or an address that cannot
+    be listened on (a port in use, a privileged port, an address not on this machine), before the
+    web server's threads start: a failure there is a traceback in a thread and a process that never ends.
+
+    Raises:
+        InspectorError: naming ``--host`` or ``--port`` and why.
+    """
+    found: list = []
+    resolver = threading.Thread(target=lambda: found.append(_resolve(host, port)), daemon=True)
+    resolver.start()
+    resolver.join(RESOLVE_TIMEOUT_S)
+    if not found:
+        raise InspectorError("--host", f"cannot resolve {host!r} within {RESOLVE_TIMEOUT_S:g} s")
+    if isinstance(found[0], OSError):
+        raise InspectorError("--host", f"cannot resolve {host!r} ({found[0].strerror or found[0]})")
+    family, address = found[0]
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the server itself binds
+        try:
+            probe.bind(address)
+        except OSError as exc:
+            raise InspectorError("--port", f"cannot listen on {host}:{port} ({exc.strerror or exc})") from None
+
+
+def _resolve(host: str, port: int) -> tuple[int, tuple] | OSError:
+    try:
+        family, _, _, _, address = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0]
+    except OSError as exc:
+        return exc
+    return family, address
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _OneLineParser(
         prog="inspector",
         description="Rollout inspector for world-action models on the SO-101 arm.")
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
@@ -153,7 +231,7 @@ def build_parser() -> argparse.ArgumentParser:
     dz.add_argument("src", help="a rollout directory or a parent of several (searched recursively)")
     dz.add_argument("-o", "--output", required=True, help="session directory to create")
     dz.add_argument("--dataset", help="LeRobot dataset (root or org/name in the HF cache) with the GT episode")
-    dz.add_argument("--episode", type=int, help="GT episode index (default: the rollout's own)")
+    dz.add_argument("--episode", type=_index, help="GT episode index (default: the rollout's own)")
     dz.add_argument("--overwrite", action="store_true", help="replace an existing session")
     dz.set_defaults(func=_cmd_import)
 
@@ -193,7 +271,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("paths", nargs="*", help="sessions, rollouts, DreamZero-SO101 source dirs or LeRobot "
                                             "datasets (a directory or org/name in the local cache)")
     p.add_argument("--host", default="127.0.0.1", help="interface to bind (default loopback only)")
-    p.add_argument("--port", type=int, default=8080, help="TCP port (default 8080; 0 picks a free one)")
+    p.add_argument("--port", type=_port, default=8080, help="TCP port (default 8080; 0 picks a free one)")
     p.add_argument("--share", action="store_true", help="also open a public viser share link")
     p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
     p.add_argument("--cache-mb", type=_positive_float, default=DEFAULT_FRAME_CACHE_MB, metavar="MB",
@@ -207,7 +285,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", default=".",
                    help=".rrd file (or directory for several rollouts; default: the current directory)")
     p.add_argument("--rollout", help="tag of the rollout to export (default: all)")
-    p.add_argument("--episode", type=int, action="append", metavar="N",
+    p.add_argument("--episode", type=_index, action="append", metavar="N",
                    help="a LeRobot dataset's episode to export (repeat for several)")
     p.add_argument("--views", nargs="*", help="camera views to include (default: all)")
     p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
