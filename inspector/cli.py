@@ -133,24 +133,24 @@ def _number(text: str, kind: type[int] | type[float]) -> float:
     return value
 
 
-def _positive_int(text: str) -> int:
-    value = int(_number(text, int))
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1 (got {value})")
-    return value
+def _whole_number_at_least(minimum: int) -> Callable[[str], int]:
+    """An argparse type: a whole number >= ``minimum``."""
+    def parse(text: str) -> int:
+        value = int(_number(text, int))
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum} (got {value})")
+        return value
+    return parse
+
+
+_positive_int = _whole_number_at_least(1)  # --jobs
+_index = _whole_number_at_least(0)  # --episode
 
 
 def _positive_float(text: str) -> float:
     value = _number(text, float)
     if not value > 0:
         raise argparse.ArgumentTypeError(f"must be more than 0 (got {text})")
-    return value
-
-
-def _index(text: str) -> int:
-    value = int(_number(text, int))
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be at least 0 (got {value})")
     return value
 
 
