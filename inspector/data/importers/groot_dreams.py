@@ -398,7 +398,7 @@ class NeuralTrajectories:
             warnings.append(f"generated video {video} not found: the arm alone is shown")
             video = None
         elif video is not None:
-            n = len(VideoClip(video).timestamps())
+            n = probe(video).n_frames or len(VideoClip(video).timestamps())  # the header's count, else packets
             if abs(n - info.length) > FRAME_COUNT_SLACK:
                 warnings.append(f"the generated video has {n} frames, the episode {info.length} steps")
         return Trajectory(info.index, info.task, self.is_dream(info), raw, actions, stamps, fps, video, warnings)
@@ -621,9 +621,10 @@ def _read_table(f: Path, columns: list[str]) -> Any:
     if not f.is_file():
         raise InspectorError(f, "data file not found")
     try:
-        names = pq.read_schema(f).names
-        require(ACTION_KEY in names, f, f"no '{ACTION_KEY}' column; columns: {names}")
-        return pq.read_table(f, columns=[c for c in columns if c in names])
+        with pq.ParquetFile(f) as pf:  # not read_table: its dataset machinery costs more than these small files
+            names = pf.schema_arrow.names
+            require(ACTION_KEY in names, f, f"no '{ACTION_KEY}' column; columns: {names}")
+            return pf.read(columns=[c for c in columns if c in names])
     except InspectorError:
         raise
     except Exception as exc:
