@@ -124,6 +124,22 @@ def test_a_wrong_calibration_is_said_not_hidden(dump):
                for w in warnings)
 
 
+def test_the_calibration_reaches_the_reports_workers(dump):
+    out = _cli("report", str(dump), "--json", "--jobs", "2", "--calibration", "none")
+    rows = json.loads(out.stdout)["neural_trajectories"]
+    assert [r["calibration"] for r in rows] == ["none"] * 3
+    assert all(r["limit_violations"]["steps"] == r["length"] for r in rows)
+    assert all("the calibration (none) is probably wrong" in r["warnings"][0] for r in rows)
+
+
+def test_a_dump_whose_actions_were_never_written_says_so(tmp_path):
+    from inspector.data.importers.groot_dreams import NeuralTrajectories
+
+    root = write_groot_dreams(tmp_path / "d", EPISODES[:1], actions=[np.zeros((20, 44))])
+    assert NeuralTrajectories(root).trajectory(0).warnings == [
+        "every action is 0: the IDM labels were never written (run dump_idm_actions.py)"]
+
+
 def test_info_on_a_directory_no_layout_fits_is_one_line_naming_the_layouts(tmp_path):
     (tmp_path / "something").mkdir()
     out = _cli("info", str(tmp_path / "something"))

@@ -1,4 +1,5 @@
-"""``inspector info``: what a LeRobot dataset or a session holds."""
+"""``inspector info``: what a session, a LeRobot dataset or a GR00T-Dreams dump holds; a directory
+no layout fits gets one line naming the layouts it knows (:data:`KNOWN_LAYOUTS`)."""
 
 from __future__ import annotations
 

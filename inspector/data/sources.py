@@ -106,7 +106,9 @@ def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine
         session.rollouts = {k: v for k, v in session.rollouts.items() if k == keep}
         session.errors = {k: v for k, v in session.errors.items() if k == keep}
     else:
-
+        if path.is_dir() and is_groot_dreams(path):  # (serve, report and export take it as a dataset)
+            raise InspectorError(path, "a GR00T-Dreams dump is not a session here; import it first: "
+                                       "inspector import groot-dreams PATH -o SESSION")
         find_sources(path)  # raises a clear error when there is nothing to import
         session_path, handle = load_in_memory(path, dataset=dataset)
         out._temps.append(handle)

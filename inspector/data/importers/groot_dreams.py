@@ -392,7 +392,10 @@ class NeuralTrajectories:
             stamps = np.arange(info.length) / fps
             warnings.append(f"no '{TIMESTAMP_KEY}' column: steps taken at {fps:g} fps")
         actions = self.calibration.apply(raw)
-        warnings += self._calibration_warnings(actions)
+        if not raw.any():  # raw_to_lerobot.py's placeholder, never overwritten by the IDM dump
+            warnings.append("every action is 0: the IDM labels were never written (run dump_idm_actions.py)")
+        else:
+            warnings += self._calibration_warnings(actions)
         video = next(iter(info.videos.values())).path if info.videos else None
         if video is not None and not video.is_file():
             warnings.append(f"generated video {video} not found: the arm alone is shown")
