@@ -463,7 +463,7 @@ def rollout_args(tr: Trajectory, ds: NeuralTrajectories) -> dict[str, Any]:
     return dict(
         kind="single_chunk", prompt=tr.task, episode_index=None, start_frame=0, fps=tr.fps,
         executed_per_chunk=n, frames_per_chunk=n, actions=tr.actions[None],
-        videos={"webcam" if not ds.cameras else ds.cameras[0]: tr.video} if tr.video is not None else {},
+        videos={ds.cameras[0]: tr.video} if tr.video is not None else {},  # a video comes from a camera
         extra={"source": {"format": LAYOUT, "path": str(ds.root.resolve()), "episode_index": tr.index,
                           "dream": tr.dream, "calibration": ds.calibration.to_json(), "fps": tr.fps,
                           "info_fps": ds.info_fps, "raw_range": {j: [float(lo), float(hi)] for j, lo, hi in
