@@ -389,3 +389,10 @@ def test_a_neural_trajectory_in_chromium(dump, tmp_path):
             browser.close()
     finally:
         app.stop()
+
+
+def test_report_html_of_a_dump_alone_is_written(dump, tmp_path):
+    """A report of datasets alone has no rollout rows: the page is still written (it raised before)."""
+    out = _cli("report", str(dump), "--html", str(tmp_path / "r.html"))
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / "r.html").read_text().startswith("<!DOCTYPE html>")
