@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InspectorError
+from .importers import dreamzero_offline
 from .lerobot_dataset import INFO_PATH, LeRobotDataset, is_lerobot_dataset
 from .session import is_rollout, is_session, load_rollout, open_session
 
@@ -38,7 +39,11 @@ def describe(path: Path) -> dict[str, Any]:
         return {"format": "session", "rollouts": [_rollout_info(load_rollout(path))]}
     if not path.exists():
         raise InspectorError(path, "not found")
-    raise InspectorError(path, "neither a LeRobot dataset (meta/info.json) nor a session (session.json)")
+    if dreamzero_offline.find_runs(path):
+        return dreamzero_offline.describe(path)
+    from .sources import RAW_LAYOUTS
+
+    raise InspectorError(path, f"no layout recognised; known: {', '.join(RAW_LAYOUTS)}")
 
 
 def _rollout_info(r: Any) -> dict[str, Any]:
@@ -54,6 +59,8 @@ def _dataset_has_episode(r: Any) -> bool:
 
 def format_info(info: dict[str, Any]) -> str:
     """Readable table of :func:`describe`'s output."""
+    if info["format"] == dreamzero_offline.FORMAT:
+        return dreamzero_offline.format_description(info)
     if info["format"] == "lerobot":
         lines = [f"LeRobot dataset {info['codebase_version']}, {info['robot_type']}, {info['fps']} fps, "
                  f"cameras: {', '.join(info['cameras']) or 'none'}",

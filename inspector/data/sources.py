@@ -18,10 +18,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InspectorError
+from .importers import dreamzero_offline
 from .importers.dreamzero_so101 import find_sources, load_in_memory
 from .lerobot_dataset import INFO_PATH, REPO_ID, find_dataset, is_lerobot_dataset, open_dataset
 from .session import Rollout, Session, is_rollout, is_session, open_session
 
+# What a PATH may be besides a session, for the error a path none of them fits gets.
+RAW_LAYOUTS = ("a session (session.json)", "a LeRobot dataset (meta/info.json)",
+               "DreamZero-SO101 evaluation (meta.json + action_trace.npy or actions_pred)",
+               f"{dreamzero_offline.LAYOUT_NAME} ({dreamzero_offline.ACTIONS_CSV})")
 BUNDLED_DEMO = Path(__file__).resolve().parents[2] / "sessions" / "demo"
 
 
@@ -102,11 +107,10 @@ def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine
         session.rollouts = {k: v for k, v in session.rollouts.items() if k == keep}
         session.errors = {k: v for k, v in session.errors.items() if k == keep}
     else:
-
-        find_sources(path)  # raises a clear error when there is nothing to import
-        session_path, handle = load_in_memory(path, dataset=dataset)
+        session_path, handle, errors = _import_raw(path, dataset)
         out._temps.append(handle)
         session = opened(session_path)
+        session.errors.update(errors)
         out.roots.append(Path(handle.name))
     if dataset is not None and session.dataset_root is None:
 
@@ -118,6 +122,19 @@ def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine
         return
     out.sessions.append(session)
     out.roots.append(session.root.resolve())
+
+
+def _import_raw(path: Path, dataset: str | Path | None
+                ) -> tuple[Path, tempfile.TemporaryDirectory, dict[str, InspectorError]]:
+    """Import another tool's output at ``path`` into a temporary session, by its layout:
+    (session path, handle to keep alive, {tag: error} of the runs left out)."""
+    if dreamzero_offline.find_runs(path):
+        return dreamzero_offline.load_in_memory(path, dataset=dataset)
+    try:
+        find_sources(path)  # raises a clear error when there is nothing to import
+    except InspectorError:
+        raise InspectorError(path, f"no layout recognised; known: {', '.join(RAW_LAYOUTS)}") from None
+    return (*load_in_memory(path, dataset=dataset), {})
 
 
 def _open_dataset(out: Sources, raw: str | Path, confine: bool) -> bool:
