@@ -38,7 +38,9 @@ def chunk_actions(n_chunks: int, seed: int = 0) -> np.ndarray:
     rng = np.random.default_rng(seed)
     t = np.arange(24 * n_chunks)[:, None]
     base = np.array([5.0, -20.0, 30.0, 40.0, -10.0, 30.0])
-    return base + 15 * np.sin(t / 17 + rng.uniform(0, 6, 6)) + rng.normal(0, 0.5, (len(t), 6))
+    out = base + 15 * np.sin(t / 17 + rng.uniform(0, 6, 6)) + rng.normal(0, 0.5, (len(t), 6))
+    out[5::24, 0] = 125.0  # shoulder_pan past its 110 deg limit once a chunk: a finding to count
+    return out
 
 
 def write_run(path: Path, n_chunks: int, *, seed: int = 0, mp4: bool = True, pngs: bool = True,
