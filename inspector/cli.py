@@ -55,6 +55,14 @@ def _cmd_import_offline(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_import_eval(args: argparse.Namespace) -> int:
+    from .data.importers.lerobot_eval import import_eval
+
+    dest, _ = import_eval(args.src, args.output, overwrite=args.overwrite)
+    print(f"wrote session {dest}")
+    return 0
+
+
 def _cmd_info(args: argparse.Namespace) -> int:
     from .data.info import describe, format_info
 
@@ -252,6 +260,11 @@ def build_parser() -> argparse.ArgumentParser:
     off.add_argument("--fps", type=_positive_float, help="action rate [Hz] (default: the dataset's, else 30)")
     off.add_argument("--overwrite", action="store_true", help="replace an existing session")
     off.set_defaults(func=_cmd_import_offline)
+    ev = fmt.add_parser("lerobot-eval", help="a lerobot-eval output directory (eval_info.json, videos/, recordings/)")
+    ev.add_argument("src", help="the evaluation's output directory")
+    ev.add_argument("-o", "--output", required=True, help="session directory to create")
+    ev.add_argument("--overwrite", action="store_true", help="replace an existing session")
+    ev.set_defaults(func=_cmd_import_eval)
 
     p = sub.add_parser("info", help="describe a LeRobot dataset or a session")
     p.add_argument("path")

@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InspectorError
-from .importers import dreamzero_offline
+from .importers import dreamzero_offline, lerobot_eval
 from .lerobot_dataset import INFO_PATH, LeRobotDataset, is_lerobot_dataset
 from .session import is_rollout, is_session, load_rollout, open_session
 
@@ -41,6 +41,8 @@ def describe(path: Path) -> dict[str, Any]:
         raise InspectorError(path, "not found")
     if dreamzero_offline.find_runs(path):
         return dreamzero_offline.describe(path)
+    if lerobot_eval.is_eval_output(path):
+        return lerobot_eval.describe(path)
     from .sources import RAW_LAYOUTS
 
     raise InspectorError(path, f"no layout recognised; known: {', '.join(RAW_LAYOUTS)}")
@@ -61,6 +63,8 @@ def format_info(info: dict[str, Any]) -> str:
     """Readable table of :func:`describe`'s output."""
     if info["format"] == dreamzero_offline.FORMAT:
         return dreamzero_offline.format_description(info)
+    if info["format"] == lerobot_eval.FORMAT:
+        return lerobot_eval.format_description(info)
     if info["format"] == "lerobot":
         lines = [f"LeRobot dataset {info['codebase_version']}, {info['robot_type']}, {info['fps']} fps, "
                  f"cameras: {', '.join(info['cameras']) or 'none'}",

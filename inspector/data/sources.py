@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InspectorError
-from .importers import dreamzero_offline
+from .importers import dreamzero_offline, lerobot_eval
 from .importers.dreamzero_so101 import find_sources, load_in_memory
 from .lerobot_dataset import INFO_PATH, REPO_ID, find_dataset, is_lerobot_dataset, open_dataset
 from .session import Rollout, Session, is_rollout, is_session, open_session
@@ -26,7 +26,8 @@ from .session import Rollout, Session, is_rollout, is_session, open_session
 # What a PATH may be besides a session, for the error a path none of them fits gets.
 RAW_LAYOUTS = ("a session (session.json)", "a LeRobot dataset (meta/info.json)",
                "DreamZero-SO101 evaluation (meta.json + action_trace.npy or actions_pred)",
-               f"{dreamzero_offline.LAYOUT_NAME} ({dreamzero_offline.ACTIONS_CSV})")
+               f"{dreamzero_offline.LAYOUT_NAME} ({dreamzero_offline.ACTIONS_CSV})",
+               f"{lerobot_eval.LAYOUT_NAME} ({lerobot_eval.EVAL_INFO})")
 BUNDLED_DEMO = Path(__file__).resolve().parents[2] / "sessions" / "demo"
 
 
@@ -130,6 +131,8 @@ def _import_raw(path: Path, dataset: str | Path | None
     (session path, handle to keep alive, {tag: error} of the runs left out)."""
     if dreamzero_offline.find_runs(path):
         return dreamzero_offline.load_in_memory(path, dataset=dataset)
+    if lerobot_eval.is_eval_output(path):
+        return lerobot_eval.load_in_memory(path)
     try:
         find_sources(path)  # raises a clear error when there is nothing to import
     except InspectorError:
