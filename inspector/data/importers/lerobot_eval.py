@@ -24,6 +24,7 @@ recording have no joints: they are listed as errors saying so.
 
 from __future__ import annotations
 
+import json
 import math
 import tempfile
 from collections.abc import Callable, Iterator
@@ -37,7 +38,7 @@ import numpy.typing as npt
 from ...errors import InspectorError, require
 from ...units import Units
 from ..lerobot_dataset import INFO_PATH, LeRobotDataset
-from ..session import SessionWriter, read_json_object
+from ..session import SessionWriter
 from ..video import VideoClip, encode_h264
 from .dreamzero_so101 import tag_from_name
 
@@ -101,7 +102,7 @@ def read_eval(root: Path) -> tuple[list[EvalEpisode], dict[str, InspectorError]]
         InspectorError: ``eval_info.json`` itself is unreadable or has no ``per_task`` list.
     """
     info_file = root / EVAL_INFO
-    info = read_json_object(info_file)
+    info = _read_eval_info(info_file)
     per_task = info.get("per_task")
     if not isinstance(per_task, list):
         raise InspectorError(info_file, f"per_task: expected a list of tasks, found {type(per_task).__name__}")
@@ -115,6 +116,20 @@ def read_eval(root: Path) -> tuple[list[EvalEpisode], dict[str, InspectorError]]
             name = (f"{entry.get('task_group')}_{entry.get('task_id')}" if isinstance(entry, dict) else where)
             errors[tag_from_name(name)] = exc
     return episodes, errors
+
+
+def _read_eval_info(path: Path) -> dict[str, Any]:
+    """``eval_info.json`` as lerobot-eval writes it: Python's JSON, where an average over no
+    episodes is ``NaN`` (in per_group / overall, which are not read); the fields read are checked
+    where they are used."""
+    try:
+        info = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InspectorError(path, f"cannot read: {exc}") from None
+    except (ValueError, RecursionError) as exc:
+        raise InspectorError(path, f"invalid JSON: {exc}") from None
+    require(isinstance(info, dict), path, "expected a JSON object")
+    return info
 
 
 def _task_episodes(root: Path, entry: Any, where: str) -> list[EvalEpisode]:
