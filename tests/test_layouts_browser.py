@@ -36,16 +36,19 @@ def browser():
         b.close()
 
 
-@pytest.mark.parametrize(("tag", "frames", "words"), [
-    ("ar3", {f"{v}/imagined" for v in ("front", "top", "gripper")}, "Pick the red cube"),
-    ("so101_sim_0_ep001", {"predicted/imagined", "render/gt", "top/gt"}, "executed (state)"),
-])
-def test_a_rollout_of_each_layout_shows_its_video_and_the_arm(browser, app, tag, frames, words):
+def test_a_rollout_of_each_layout_shows_its_video_and_the_arm(browser, app):
+    """The page starts on the first rollout (the offline run): open the lerobot-eval episode, then
+    come back to the run, so each one is opened from the picker."""
     page, tab = new_page(browser, app)
-    open_in_page(page, tab, app, tag)
-    assert set(frame_sources(page)) == frames
-    assert all(src.startswith("data:image/") for src in frame_sources(page).values())
-    page.wait_for_timeout(1500)  # let the software renderer draw the arm
-    assert canvas_is_drawn(page.screenshot(), SCENE_BOX), "the 3D canvas is blank"
-    assert page.get_by_text(words).first.is_visible()
+    for tag, frames, words in (
+            ("so101_sim_0_ep001", {"predicted/imagined", "render/gt", "top/gt"}, "executed (state)"),
+            ("ar3", {f"{v}/imagined" for v in ("front", "top", "gripper")}, "Pick the red cube")):
+        open_in_page(page, tab, app, tag)
+        assert set(frame_sources(page)) == frames
+        assert all(src.startswith("data:image/") for src in frame_sources(page).values())
+        page.wait_for_timeout(1500)  # let the software renderer draw the arm
+        assert canvas_is_drawn(page.screenshot(), SCENE_BOX), f"{tag}: the 3D canvas is blank"
+        assert page.get_by_text(words).first.is_visible()
+        if tag == "so101_sim_0_ep001":  # its outcome, on the card
+            assert page.get_by_text("failure · reward 0 · task so101_sim_0").first.is_visible()
     page.close()
