@@ -46,8 +46,11 @@ class Recorded:
 
 
 def write_eval(root: Path, episodes_per_task: dict[tuple[str, int], list[bool]], steps: int = 24,
-               record: bool = True, seed: int = 0) -> dict[str, list[Recorded]]:
-    """Write an output directory; returns what each task's episodes hold (in episode order)."""
+               record: bool = True, seed: int = 0, n_envs: int = 1) -> dict[str, list[Recorded]]:
+    """Write an output directory; returns what each task's episodes hold (in episode order).
+
+    With ``n_envs`` > 1 each task's recording is one dataset per env (``env_<k>``): episode i ran
+    in env i % n_envs, as lerobot-eval's batched envs do."""
     rng = np.random.default_rng(seed)
     root.mkdir(parents=True)
     per_task, out = [], {}
@@ -79,8 +82,12 @@ def write_eval(root: Path, episodes_per_task: dict[tuple[str, int], list[bool]],
             pred = vdir / f"pred_episode_{k}.mp4"
             encode_h264(pred, [flat(predicted_level(s), H, 2 * W) for s in range(steps)], fps=10, crf=18)
             pred_paths.append(str(pred))
-        if record:
+        if record and n_envs == 1:
             write_lerobot_dataset(root / "recordings" / task, episodes, fps=10, units=None, joint_names=False)
+        elif record:
+            for k in range(n_envs):
+                write_lerobot_dataset(root / "recordings" / task / f"env_{k}", episodes[k::n_envs], fps=10,
+                                      units=None, joint_names=False)
         per_task.append({"task_group": group, "task_id": task_id, "metrics": {
             "sum_rewards": [r.sum_reward for r in recs], "max_rewards": [float(r.success) for r in recs],
             "successes": successes, "video_paths": video_paths, "predicted_video_paths": pred_paths}})

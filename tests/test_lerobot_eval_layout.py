@@ -177,6 +177,16 @@ def test_import_cli_writes_a_session(evaluation, tmp_path):
     assert len(open_session(tmp_path / "s").rollouts) == 3
 
 
+def test_batched_envs_record_one_dataset_each(tmp_path):
+    """Episode i of a task ran in env i % n_envs: its arms come from env_<i % n>/ episode i // n."""
+    recorded = write_eval(tmp_path / "out", {("so101_sim", 0): [True, False, False]}, n_envs=2)
+    dest, errors = import_eval(tmp_path / "out", tmp_path / "s", log=lambda _: None)
+    assert errors == {}
+    s = open_session(dest)
+    for k, rec in enumerate(recorded["so101_sim_0"]):
+        np.testing.assert_allclose(s.rollouts[f"so101_sim_0_ep{k:03d}"].actions[0], rec.action, atol=1e-4)
+
+
 def _edit_info(root: Path, change) -> None:
     info = json.loads((root / "eval_info.json").read_text())
     change(info)
