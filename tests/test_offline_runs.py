@@ -159,6 +159,13 @@ def test_gt_from_the_sidecar_and_a_dataset(tmp_path):
     # a flag overrides the sidecar
     dest2, _ = import_offline(tmp_path / "runs", tmp_path / "s2", episode=1, start_frame=30, log=lambda _: None)
     assert open_session(dest2).rollouts["r"].start_frame == 30
+    dest3, _ = import_offline(tmp_path / "runs", tmp_path / "s3", start_frame=0, log=lambda _: None)
+    assert open_session(dest3).rollouts["r"].start_frame == 0  # 0 given overrides the sidecar's 10
+    # a dataset but no episode: the run is shown without GT joints, and says why
+    write_run(tmp_path / "bare" / "r", 1)
+    dest4, errors = import_offline(tmp_path / "bare", tmp_path / "s4", dataset=tmp_path / "ds", log=lambda _: None)
+    bare = open_session(dest4).rollouts["r"]
+    assert errors == {} and not bare.has_gt_joints and "no GT episode" in bare.extra["warnings"][0]
     out = cli("report", "--json", "--no-cache", tmp_path / "runs")
     assert out.returncode == 0, out.stderr
     row = json.loads(out.stdout)["rollouts"][0]

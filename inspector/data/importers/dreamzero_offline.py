@@ -120,12 +120,12 @@ def find_runs(src: str | Path) -> list[Path]:
 # Reading one run
 
 
-def read_run(path: Path, link: GtLink | None = None) -> OfflineRun:
+def read_run(path: Path, link: GtLink | None = None, start_frame: int | None = None) -> OfflineRun:
     """Read and check one run (frames are counted, not decoded).
 
     Args:
-        link: GT episode and start frame given on the command line; they take precedence over
-            the sidecar's.
+        link, start_frame: GT dataset, episode, fps and start frame given on the command line;
+            they take precedence over the sidecar's.
 
     Raises:
         InspectorError: naming the file and the field at fault.
@@ -152,7 +152,7 @@ def read_run(path: Path, link: GtLink | None = None) -> OfflineRun:
         warnings.append("no input_joint_positions: the arm's starting pose is unknown")
     video, n_frames = _count_frames(path)
     frames_per_chunk = _frames_per_chunk(meta, path, n_chunks, n_frames, video)
-    gt = _gt_link(path, link)
+    gt = _gt_link(path, link, start_frame)
     return OfflineRun(path=path, actions=actions, states=states, prompt=prompt, n_frames=n_frames,
                       frames_per_chunk=frames_per_chunk, video=video, metadata=meta, gt=gt,
                       warnings=warnings)
@@ -255,7 +255,8 @@ def _frames_per_chunk(meta: dict[str, Any], path: Path, n_chunks: int, n_frames:
     return per_chunk
 
 
-def _gt_link(path: Path, given: GtLink | None) -> GtLink:
+def _gt_link(path: Path, given: GtLink | None, given_start: int | None = None) -> GtLink:
+    """The run's GT link: the sidecar's, each field overridden by the one given (flags)."""
     link = GtLink()
     sidecar = path / SIDECAR
     if sidecar.is_file():
@@ -276,7 +277,7 @@ def _gt_link(path: Path, given: GtLink | None) -> GtLink:
     if given is not None:
         link.dataset = given.dataset if given.dataset is not None else link.dataset
         link.episode = given.episode if given.episode is not None else link.episode
-        link.start_frame = given.start_frame if given.start_frame else link.start_frame
+        link.start_frame = given_start if given_start is not None else link.start_frame
         link.fps = given.fps if given.fps is not None else link.fps
     return link
 
@@ -351,17 +352,19 @@ def rollout_args(run: OfflineRun, videos: dict[str, Path], ds: LeRobotDataset | 
         extra={"source": {"format": FORMAT, "path": str(run.path.resolve()), "name": run.path.resolve().name,
                           **{k: meta[k] for k in ("action_seed", "action_seeds", "num_inference_steps",
                                                    "lora_weights", "decoded_frame_count") if k in meta}},
-               **({"warnings": run.warnings} if run.warnings else {})},
+               "warnings": run.warnings},  # the list, so what is added below lands in it too
     )
-    if ds is not None:
+    if ds is not None and run.gt.episode is None:
+        run.warnings.append(f"no GT episode for the dataset: pass --episode N, or write it in {SIDECAR}")
+    elif ds is not None and run.gt.episode is not None:
         where = run.path / SIDECAR
-        if run.gt.episode is None:
-            raise InspectorError(where, "episode: not given; pass --episode N or write it in the sidecar beside the run")
         ep = ds.episode(run.gt.episode)
         require(run.gt.start_frame < ep.length, where,
                 f"start_frame: {run.gt.start_frame} lies beyond episode {run.gt.episode} ({ep.length} frames)")
         args["gt_actions"] = ep.action[run.gt.start_frame:]
         args["gt_episode_length"] = ep.length
+    if not run.warnings:
+        del args["extra"]["warnings"]
     return args
 
 
@@ -413,7 +416,7 @@ def import_offline(
     if ds is not None and ds.units.arm != UNITS.arm:
         raise InspectorError(ds.root, f"arm units {ds.units.label()}: offline-inference actions are in degrees; "
                                       "its GT would not compare")
-    link = GtLink(None, episode, start_frame or 0, fps)
+    link = GtLink(None, episode, 0, fps)
     errors: dict[str, InspectorError] = {}
     used: set[str] = set()
     with SessionWriter.create(dest, name=Path(dest).name, units=UNITS, model={"name": "DreamZero-SO101"},
@@ -423,7 +426,10 @@ def import_offline(
         for path in runs:
             tag = _unique_tag(path, src, used)
             try:
-                run = read_run(path, link)
+                run = read_run(path, link, start_frame)
+                if run.gt.dataset is not None and (ds is None or Path(run.gt.dataset).resolve() != ds.root.resolve()):
+                    run.warnings.append(f"{SIDECAR} names the dataset {run.gt.dataset}, but the session's GT "
+                                        f"dataset is {ds.root if ds is not None else 'none'}: no GT from it")
                 rate = run.gt.fps or (ds.fps if ds is not None else DEFAULT_ACTION_FPS)
                 view_dir = Path(scratch) / tag
                 view_dir.mkdir()
