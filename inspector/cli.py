@@ -52,6 +52,23 @@ def _cmd_import(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_import_offline(args: argparse.Namespace) -> int:
+    from .data.importers.dreamzero_offline import import_offline
+
+    dest, _ = import_offline(args.src, args.output, dataset=args.dataset, episode=args.episode,
+                             start_frame=args.start_frame, fps=args.fps, overwrite=args.overwrite)
+    print(f"wrote session {dest}")
+    return 0
+
+
+def _cmd_import_eval(args: argparse.Namespace) -> int:
+    from .data.importers.lerobot_eval import import_eval
+
+    dest, _ = import_eval(args.src, args.output, overwrite=args.overwrite)
+    print(f"wrote session {dest}")
+    return 0
+
+
 def _cmd_info(args: argparse.Namespace) -> int:
     from .data.info import describe, format_info
 
@@ -264,6 +281,20 @@ def build_parser() -> argparse.ArgumentParser:
     gd.add_argument("--overwrite", action="store_true", help="replace an existing session")
     _calibration_argument(gd)
     gd.set_defaults(func=_cmd_import)
+    off = fmt.add_parser("dreamzero-offline", help="DreamZero-SO101 offline_inference.py runs (predicted_actions.csv)")
+    off.add_argument("src", help="a run directory or a parent of several (searched recursively)")
+    off.add_argument("-o", "--output", required=True, help="session directory to create")
+    off.add_argument("--dataset", help="LeRobot dataset with the GT episode (default: the runs' inspector_gt.json)")
+    off.add_argument("--episode", type=_index, help="GT episode index (default: inspector_gt.json's)")
+    off.add_argument("--start-frame", type=_index, help="episode frame the run started at (default: inspector_gt.json's, else 0)")
+    off.add_argument("--fps", type=_positive_float, help="action rate [Hz] (default: the dataset's, else 30)")
+    off.add_argument("--overwrite", action="store_true", help="replace an existing session")
+    off.set_defaults(func=_cmd_import_offline)
+    ev = fmt.add_parser("lerobot-eval", help="a lerobot-eval output directory (eval_info.json, videos/, recordings/)")
+    ev.add_argument("src", help="the evaluation's output directory")
+    ev.add_argument("-o", "--output", required=True, help="session directory to create")
+    ev.add_argument("--overwrite", action="store_true", help="replace an existing session")
+    ev.set_defaults(func=_cmd_import_eval)
 
     p = sub.add_parser("info", help="describe a session, a LeRobot dataset or a GR00T-Dreams dump")
     p.add_argument("path")

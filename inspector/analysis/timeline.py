@@ -115,6 +115,9 @@ class RolloutTimeline:
 
     @property
     def labels(self) -> ArmLabels:
+        named = self.rollout.extra.get("arm_labels")  # an importer's own words (e.g. commanded / executed)
+        if isinstance(named, dict) and all(isinstance(named.get(k), str) for k in ("pred", "gt", "drift")):
+            return ArmLabels(named["pred"], named["gt"], named["drift"])
         return EPISODE_LABELS if self.kind == "episode" else ROLLOUT_LABELS
 
     def step_of(self, chunk: int, step_in_chunk: int) -> int:

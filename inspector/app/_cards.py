@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..analysis import metrics
-from ..analysis.timeline import RolloutTimeline
+from ..analysis.timeline import ROLLOUT_LABELS, RolloutTimeline
 from ..errors import InspectorError, one_line
 from ..units import JOINT_NAMES
 from ._frames import LOADING, READY, FramePair
@@ -165,9 +165,24 @@ def rollout_card(tl: RolloutTimeline, metrics: Sequence[tuple[str, str]], gt_not
         ("units", esc(tl.units.label())),
         ("ground truth", esc(tl.gt.source) + (f"<br><span style='{MUTED}'>{esc(gt_note)}</span>" if gt_note else "")),
     ]
-    rows.append(("3D scene", SCENE_LEGEND if tl.has_gt_joints else SCENE_LEGEND_NO_GT))
+    outcome = r.extra.get("outcome")
+    if isinstance(outcome, dict) and outcome.get("success") is not None:  # a simulated evaluation's verdict
+        reward = outcome.get("sum_reward")
+        rows.append(("outcome", esc(f"{'success' if outcome['success'] else 'failure'} · reward "
+                                    f"{'—' if reward is None else format(reward, '.3g')} · task {outcome.get('task')}")))
+    rows.append(("3D scene", _scene_legend(tl)))
     rows += [(esc(k), esc(v)) for k, v in metrics]
     return _card_table(r.tag, rows)
+
+
+def _scene_legend(tl: RolloutTimeline) -> str:
+    if not tl.has_gt_joints:
+        return SCENE_LEGEND_NO_GT
+    if tl.labels == ROLLOUT_LABELS:
+        return SCENE_LEGEND
+    # the importer named the two arms (e.g. commanded / executed)
+    return " · ".join(_SWATCH.format(c, esc(t)) for c, t in (
+        ("#9ea3ad", f"{tl.labels.gt} arm"), ("#f76707", f"{tl.labels.pred} arm"), ("#2b8a3e", f"{tl.labels.gt} path")))
 
 
 def episode_card(tl: RolloutTimeline, metrics: Sequence[tuple[str, str]]) -> str:

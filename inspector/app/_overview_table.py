@@ -24,8 +24,9 @@ from ._overview_rows import OverviewRow
 
 SCOPE = "inspector-overview"  # the class of the overview's elements; its styles apply under it
 ALL_KINDS, ALL_SESSIONS, NO_COMPARE = "all kinds", "all sessions", "— none —"
+FAILED = "failed episodes"  # a simulated evaluation's episodes that did not succeed
 KIND_FILTERS = {ALL_KINDS: None, "single-chunk": "single_chunk", "autoregressive": "autoregressive",
-                "errors": "error"}
+                "errors": "error", FAILED: "failed"}
 PICKER_ORDER = "picker order"
 DELTA_RMSE = "Δ RMSE (B − A)"
 # Rows drawn in the table at most: the page holds what is on screen, filters narrow the rest.
@@ -49,7 +50,13 @@ METRICS: dict[str, Callable[[Summary], float | None]] = {
     "tempo": lambda s: s["tempo"],
     "EE error": _drift("ee_error_mm", "mean"),
     "limit steps": lambda s: s["limit_violations"]["steps"],
+    "reward": lambda s: (s.get("outcome") or {}).get("sum_reward"),
 }
+
+
+def outcome_of(row: OverviewRow) -> dict[str, Any] | None:
+    """A simulated evaluation's verdict for the row (success, rewards, task), or None."""
+    return row.summary.get("outcome") if row.summary else None
 
 
 def psnr_label(view: str) -> str:
@@ -123,7 +130,10 @@ def _matches(row: OverviewRow, q: Query, notes: Mapping[str, Note]) -> bool:
     if q.session != ALL_SESSIONS and row.session != q.session:
         return False
     kind = KIND_FILTERS.get(q.kind)
-    if kind is not None and _kind_of(row) != kind:
+    if kind == "failed":
+        if (outcome := outcome_of(row)) is None or outcome.get("success") is not False:
+            return False
+    elif kind is not None and _kind_of(row) != kind:
         return False
     if q.flagged_only and not notes.get(row.key, Note()).flag:
         return False
@@ -238,8 +248,15 @@ def _metric_cell(label: str, fmt: str) -> Callable[[OverviewRow], str]:
     return lambda r: "" if r.summary is None else _f(METRICS[label](r.summary), fmt)
 
 
+def _outcome_cell(r: OverviewRow) -> str:
+    o = outcome_of(r)
+    if o is None or o.get("success") is None:
+        return "–"
+    return "<span style='color:#2b8a3e'>✓</span>" if o["success"] else "<span style='color:#c92a2a'>✗</span>"
+
+
 def _columns(views: Sequence[str], notes: Mapping[str, Note], comparison: Comparison | None,
-             many_sessions: bool) -> list[_Column]:
+             many_sessions: bool, outcomes: bool = False) -> list[_Column]:
     def note_of(r: OverviewRow) -> Note:
         return notes.get(r.key, Note())
 
@@ -257,6 +274,11 @@ def _columns(views: Sequence[str], notes: Mapping[str, Note], comparison: Compar
         _Column("prompt", "the prompt", lambda r: f"<span title='{escape(r.prompt)}'>{escape(r.prompt)}</span>",
                 False, "prompt"),
         _Column("episode", "GT episode @ start frame", episode, False),
+    ]
+    if outcomes:  # a simulated evaluation: did the episode succeed, and its summed reward
+        cols += [_Column("success", "the episode succeeded in simulation", _outcome_cell, css="success"),
+                 _Column("reward", "summed reward of the episode", _metric_cell("reward", ".3g"), css="reward")]
+    cols += [
         _Column("RMSE °", "chunk RMSE over steps and joints [deg]", _metric_cell("RMSE", ".3f"), css="rmse"),
         _Column("time-al. °", "time-aligned drift, mean over in-episode steps [deg]",
                 _metric_cell("time-aligned mean", ".2f")),
@@ -312,7 +334,8 @@ def table_html(rows: Sequence[OverviewRow], shown: Sequence[OverviewRow], notes:
     them (they decide the PSNR columns). Each row carries its catalog key (``data-key``), each
     cell its column (``data-col``); the rollout open in the tab is marked."""
     views = views_of(rows)
-    cols = _columns(views, notes, comparison, len({r.session for r in rows}) > 1)
+    cols = _columns(views, notes, comparison, len({r.session for r in rows}) > 1,
+                    outcomes=any(outcome_of(r) is not None for r in rows))
     head = "".join(f"<th title='{escape(c.tip)}'{' class=num' if c.numeric else ''}>{escape(c.header)}</th>"
                    for c in cols)
     body = []

@@ -1,5 +1,5 @@
-"""``inspector info``: what a session, a LeRobot dataset or a GR00T-Dreams dump holds; a directory
-no layout fits gets one line naming the layouts it knows (:data:`KNOWN_LAYOUTS`)."""
+"""``inspector info``: what a PATH holds, in whichever layout it is; a directory no layout fits gets
+one line naming the layouts it knows (:data:`.sources.RAW_LAYOUTS`)."""
 
 from __future__ import annotations
 
@@ -7,19 +7,12 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InspectorError
+from .importers import dreamzero_offline, lerobot_eval
 from .importers.groot_dreams import LAYOUT as GROOT_DREAMS
-from .importers.groot_dreams import LAYOUT_HINT as GROOT_DREAMS_HINT
-from .importers.groot_dreams import LAYOUT_TITLE as GROOT_DREAMS_TITLE
 from .importers.groot_dreams import NeuralTrajectories, describe_layout, format_layout, is_groot_dreams
 from .lerobot_dataset import INFO_PATH, LeRobotDataset, is_lerobot_dataset
 from .session import is_rollout, is_session, load_rollout, open_session
-
-# Every layout ``info`` recognises, (name, what marks it), for the line a directory none fits gets.
-KNOWN_LAYOUTS = [
-    ("session", "session.json"),
-    ("LeRobot dataset", "meta/info.json with codebase_version"),
-    (GROOT_DREAMS_TITLE, GROOT_DREAMS_HINT),
-]
+from .sources import no_layout_fits
 
 
 def describe(path: Path, calibration: str | None = None) -> dict[str, Any]:
@@ -53,8 +46,11 @@ def describe(path: Path, calibration: str | None = None) -> dict[str, Any]:
         return {"format": "session", "rollouts": [_rollout_info(load_rollout(path))]}
     if not path.exists():
         raise InspectorError(path, "not found")
-    raise InspectorError(path, "no known layout fits; known: " + "; ".join(f"{name} ({mark})"
-                                                                         for name, mark in KNOWN_LAYOUTS))
+    if dreamzero_offline.find_runs(path):
+        return dreamzero_offline.describe(path)
+    if lerobot_eval.is_eval_output(path):
+        return lerobot_eval.describe(path)
+    raise no_layout_fits(path)
 
 
 def _rollout_info(r: Any) -> dict[str, Any]:
@@ -72,6 +68,10 @@ def format_info(info: dict[str, Any]) -> str:
     """Readable table of :func:`describe`'s output."""
     if info["format"] == GROOT_DREAMS:
         return format_layout(info)
+    if info["format"] == dreamzero_offline.FORMAT:
+        return dreamzero_offline.format_description(info)
+    if info["format"] == lerobot_eval.FORMAT:
+        return lerobot_eval.format_description(info)
     if info["format"] == "lerobot":
         lines = [f"LeRobot dataset {info['codebase_version']}, {info['robot_type']}, {info['fps']} fps, "
                  f"cameras: {', '.join(info['cameras']) or 'none'}",

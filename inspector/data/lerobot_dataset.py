@@ -389,8 +389,15 @@ class LeRobotDataset:
             ``observation.state`` / ``action`` features.
     """
 
-    def __init__(self, root: str | Path) -> None:
+    def __init__(self, root: str | Path, unnamed_joints_in_so101_order: bool = False) -> None:
+        """Args:
+            unnamed_joints_in_so101_order: take a 6-value ``observation.state`` / ``action`` whose
+                ``names`` is null (as ``lerobot-eval --eval.recording`` writes them) in
+                :data:`JOINT_NAMES` order, instead of refusing it; :attr:`unnamed_joints` lists them.
+        """
         self.root = _expand(root)
+        self._unnamed_ok = unnamed_joints_in_so101_order
+        self.unnamed_joints: list[str] = []
         self._info_file = self.root / INFO_PATH
         info = self._read_info()
         self.info: dict[str, Any] = info
@@ -414,8 +421,7 @@ class LeRobotDataset:
 
         # Column order on disk -> JOINT_NAMES order, per joint feature.
         self._order = {key: self._joint_feature_order(key) for key in (STATE_KEY, ACTION_KEY)}
-        names = _feature_names(self.features[STATE_KEY])
-        assert names is not None  # _joint_feature_order raised above otherwise
+        names = _feature_names(self.features[STATE_KEY]) or list(JOINT_NAMES)  # None: taken in SO-101 order
         self.joint_names: list[str] = [canonical_joint_name(names[i]) for i in self._order[STATE_KEY]]
 
         self._units: Units | None = None
@@ -481,6 +487,9 @@ class LeRobotDataset:
         feature = self.features[key]
         names = _feature_names(feature)
         shape = feature.get("shape")
+        if names is None and self._unnamed_ok and shape == [len(JOINT_NAMES)]:
+            self.unnamed_joints.append(key)
+            return np.arange(len(JOINT_NAMES), dtype=np.int64)
         if names is None:
             raise InspectorError(self._info_file, f"features.{key}.names is missing; expected the 6 "
                                                   f"SO-101 joints {list(JOINT_NAMES)}")

@@ -87,11 +87,14 @@ class EpisodeData:
     state: npt.NDArray[np.floating]
     action: npt.NDArray[np.floating]
     frames: dict[str, npt.NDArray[np.uint8]] = field(default_factory=dict)
+    # more per-frame scalar columns, e.g. ``{"next.reward": (T,) float32, "next.success": (T,) bool}``
+    # (what ``lerobot-eval --eval.recording`` adds); every episode names the same ones
+    columns: dict[str, npt.NDArray[Any]] = field(default_factory=dict)
 
 
 def write_lerobot_dataset(root: str | Path, episodes: list[EpisodeData], fps: int = 30,
                           robot_type: str = "so101_follower", *, units: Units | None = Units(),
-                          overwrite: bool = False, crf: int = 23) -> Path:
+                          overwrite: bool = False, crf: int = 23, joint_names: bool = True) -> Path:
     """Write ``episodes`` as a LeRobot v3.0 dataset at ``root``, atomically.
 
     The dataset is built in a temporary directory next to ``root`` and renamed into place when
@@ -107,6 +110,8 @@ def write_lerobot_dataset(root: str | Path, episodes: list[EpisodeData], fps: in
             None leaves them unstated, as LeRobot itself does.
         overwrite: replace an existing non-empty ``root`` (only once the new one is complete).
         crf: H.264 quality (lower is better, 18 near-lossless).
+        joint_names: name the six joints in ``features`` (False writes ``names: null``, as
+            ``lerobot-eval`` records them).
 
     Returns:
         ``root`` as a Path.
@@ -126,7 +131,7 @@ def write_lerobot_dataset(root: str | Path, episodes: list[EpisodeData], fps: in
     tmp = root.parent / f".{root.name}.tmp-{uuid.uuid4().hex[:8]}"
     tmp.mkdir()
     try:
-        _write_all(tmp, episodes, cameras, fps, robot_type, units, crf)
+        _write_all(tmp, episodes, cameras, fps, robot_type, units, crf, joint_names)
         _replace_dir(tmp, root)
     finally:
         if tmp.exists():
@@ -173,7 +178,7 @@ def _validate(root: Path, episodes: list[EpisodeData]) -> list[str]:
 # ==================================================================================================
 
 def _write_all(out: Path, episodes: list[EpisodeData], cameras: list[str], fps: int, robot_type: str,
-               units: Units | None, crf: int) -> None:
+               units: Units | None, crf: int, joint_names: bool = True) -> None:
     tasks: list[str] = []  # task_index order = order of first appearance
     for ep in episodes:
         if ep.task not in tasks:
@@ -191,6 +196,12 @@ def _write_all(out: Path, episodes: list[EpisodeData], cameras: list[str], fps: 
         video_shapes[cam] = (h + h % 2, w + w % 2)
 
     features = _features(cameras, video_shapes, fps)
+    if not joint_names:
+        for key in (ACTION_KEY, STATE_KEY):
+            features[key]["names"] = None
+    for name, values in episodes[0].columns.items():
+        features[name] = {"dtype": "bool" if np.asarray(values).dtype == bool else "float32", "shape": [1],
+                          "names": None}
     per_episode_stats = [_episode_stats(ep, e, int(starts[e]), tasks.index(ep.task), cameras, fps)
                          for e, ep in enumerate(episodes)]
 
@@ -260,9 +271,11 @@ def _write_data(path: Path, episodes: list[EpisodeData], starts: npt.NDArray[np.
     import pyarrow.parquet as pq
 
     joints_type = pa.list_(pa.float32(), len(JOINT_NAMES))
+    extra = {name: pa.bool_() if np.asarray(v).dtype == bool else pa.float32()
+             for name, v in episodes[0].columns.items()}
     schema = pa.schema([(ACTION_KEY, joints_type), (STATE_KEY, joints_type), (TIMESTAMP_KEY, pa.float32()),
                         (FRAME_INDEX_KEY, pa.int64()), (EPISODE_INDEX_KEY, pa.int64()),
-                        (INDEX_KEY, pa.int64()), (TASK_INDEX_KEY, pa.int64())],
+                        (INDEX_KEY, pa.int64()), (TASK_INDEX_KEY, pa.int64()), *extra.items()],
                        metadata={"huggingface": json.dumps({"info": {"features": _HF_FEATURES}})})
     path.parent.mkdir(parents=True, exist_ok=True)
     with pq.ParquetWriter(path, schema) as writer:
@@ -277,6 +290,7 @@ def _write_data(path: Path, episodes: list[EpisodeData], starts: npt.NDArray[np.
                 EPISODE_INDEX_KEY: np.full(T, e, dtype=np.int64),
                 INDEX_KEY: starts[e] + frame_index,
                 TASK_INDEX_KEY: np.full(T, tasks.index(ep.task), dtype=np.int64),
+                **{name: pa.array(np.asarray(ep.columns[name]).reshape(T), t) for name, t in extra.items()},
             }, schema=schema))
 
 

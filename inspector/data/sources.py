@@ -18,11 +18,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InspectorError
+from .importers import dreamzero_offline, lerobot_eval
 from .importers.dreamzero_so101 import find_sources, load_in_memory
+from .importers.groot_dreams import LAYOUT_HINT as GROOT_DREAMS_HINT
+from .importers.groot_dreams import LAYOUT_TITLE as GROOT_DREAMS_TITLE
 from .importers.groot_dreams import is_groot_dreams, open_trajectories
 from .lerobot_dataset import INFO_PATH, REPO_ID, find_dataset, is_lerobot_dataset, open_dataset
 from .session import Rollout, Session, is_rollout, is_session, open_session
 
+# What a PATH may be besides a session, for the error a path none of them fits gets.
+RAW_LAYOUTS = ("a session (session.json)", "a LeRobot dataset (meta/info.json)",
+               f"{GROOT_DREAMS_TITLE} ({GROOT_DREAMS_HINT})",
+               "DreamZero-SO101 evaluation (meta.json + action_trace.npy or actions_pred)",
+               f"{dreamzero_offline.LAYOUT_NAME} ({dreamzero_offline.ACTIONS_CSV})",
+               f"{lerobot_eval.LAYOUT_NAME} ({lerobot_eval.EVAL_INFO})")
 BUNDLED_DEMO = Path(__file__).resolve().parents[2] / "sessions" / "demo"
 
 
@@ -109,10 +118,10 @@ def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine
         if path.is_dir() and is_groot_dreams(path):  # (serve, report and export take it as a dataset)
             raise InspectorError(path, "a GR00T-Dreams dump is not a session here; import it first: "
                                        "inspector import groot-dreams PATH -o SESSION")
-        find_sources(path)  # raises a clear error when there is nothing to import
-        session_path, handle = load_in_memory(path, dataset=dataset)
+        session_path, handle, errors = _import_raw(path, dataset)
         out._temps.append(handle)
         session = opened(session_path)
+        session.errors.update(errors)
         out.roots.append(Path(handle.name))
     if dataset is not None and session.dataset_root is None:
 
@@ -124,6 +133,26 @@ def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine
         return
     out.sessions.append(session)
     out.roots.append(session.root.resolve())
+
+
+def _import_raw(path: Path, dataset: str | Path | None
+                ) -> tuple[Path, tempfile.TemporaryDirectory, dict[str, InspectorError]]:
+    """Import another tool's output at ``path`` into a temporary session, by its layout:
+    (session path, handle to keep alive, {tag: error} of the runs left out)."""
+    if dreamzero_offline.find_runs(path):
+        return dreamzero_offline.load_in_memory(path, dataset=dataset)
+    if lerobot_eval.is_eval_output(path):
+        return lerobot_eval.load_in_memory(path)
+    try:
+        find_sources(path)  # raises a clear error when there is nothing to import
+    except InspectorError:
+        raise no_layout_fits(path) from None
+    return (*load_in_memory(path, dataset=dataset), {})
+
+
+def no_layout_fits(path: Path) -> InspectorError:
+    """The one line for a directory none of :data:`RAW_LAYOUTS` fits: it names them all."""
+    return InspectorError(path, f"no layout recognised; known: {', '.join(RAW_LAYOUTS)}")
 
 
 def _open_dataset(out: Sources, raw: str | Path, confine: bool, calibration: str | None = None) -> bool:

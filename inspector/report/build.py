@@ -163,7 +163,8 @@ def format_report(report: dict[str, Any]) -> str:
     """Readable tables: single-chunk rollouts, autoregressive drift, aggregate, prompt pairs."""
     rows = report["rollouts"]
     lines: list[str] = _episode_table(report.get("episodes", [])) + trajectory_table(report.get("neural_trajectories", []))
-    single = [r for r in rows if r["kind"] == "single_chunk"]
+    evaluated = [r for r in rows if r.get("outcome")]
+    single = [r for r in rows if r["kind"] == "single_chunk" and not r.get("outcome")]
     auto = [r for r in rows if r["kind"] == "autoregressive"]
     views = sorted({v for r in rows for v in r["video_psnr_db"]})
     psnr_head = "".join(f" {'PSNR ' + v:>11}" for v in views)
@@ -183,6 +184,7 @@ def format_report(report: dict[str, Any]) -> str:
                          f"{_f(mse[0] if mse else None):>10} {_f(mse[-1] if mse else None):>9} "
                          f"{r['limit_violations']['steps']:>9}{psnr_cells(r)}  {r['prompt']}")
         lines.append("")
+    lines += _evaluated_table(evaluated, report["aggregate"].get("success_by_task", []))
     if auto:
         lines += ["Autoregressive rollouts (drift in data units; post-episode samples excluded)",
                   f"{'rollout':<{width}} {'chunks':>6} {'time-al.':>9} {'final':>8} {'best-m.':>8} {'DTW':>7} "
@@ -234,6 +236,27 @@ def _episode_table(episodes: list[dict[str, Any]]) -> list[str]:
         lines.append(f"{e['dataset']:<{width}} {e['episode_index']:>5} {e['length']:>6} {te['l2_mean']:>10.2f} "
                      f"{te['l2_max']:>7.2f} {worst:>20} {e['ee_tracking_error_mm']['mean']:>6.1f} "
                      f"{str(lim['measured']['steps']) + ' / ' + str(lim['commanded']['steps']):>18}  {e['task']}")
+    lines.append("")
+    return lines
+
+
+def _evaluated_table(rows: list[dict[str, Any]], by_task: list[dict[str, Any]]) -> list[str]:
+    """Episodes of a simulated evaluation: success, reward, how closely the arm followed its
+    commands; then the success rate per task."""
+    if not rows:
+        return []
+    width = max([18] + [len(r["tag"]) for r in rows])
+    lines = ["Evaluated episodes (tracking = commanded action vs executed state)",
+             f"{'episode':<{width}} {'success':>7} {'reward':>8} {'max rew.':>8} {'steps':>6} {'RMSE deg':>9} "
+             f"{'lim.steps':>9}  task"]
+    for r in rows:
+        o = r["outcome"]
+        lines.append(f"{r['tag']:<{width}} {'yes' if o.get('success') else 'no':>7} {_f(o.get('sum_reward'), '.3g'):>8} "
+                     f"{_f(o.get('max_reward'), '.3g'):>8} {r['steps_per_chunk']:>6} {_f(r['rmse_deg'], '.3f'):>9} "
+                     f"{r['limit_violations']['steps']:>9}  {o.get('task')}")
+    lines += ["", "Success rate per task"]
+    lines += [f"  {t['task']}: {t['successes']}/{t['episodes']} ({100 * t['success_rate']:.0f}%), mean reward "
+              f"{_f(t['mean_sum_reward'], '.3g')}" for t in by_task]
     lines.append("")
     return lines
 

@@ -92,6 +92,8 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> d
         "gt_source": tl.gt.source,
         "gt_warning": tl.gt.warning,
         "chunk_joints": _chunk_joints(tl),
+        # a simulated evaluation's verdict (success, rewards, task), as its importer kept it
+        "outcome": r.extra.get("outcome"),
     }
 
 
@@ -127,7 +129,26 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "worst_rmse_deg": rmse["worst"],
         # per view: one average of front and wrist would hide which camera the model gets right
         "mean_video_psnr_db": {view: float(np.mean(v)) for view, v in sorted(by_view.items())},
+        **({"success_by_task": by_task} if (by_task := success_by_task(rows)) else {}),
     }
+
+
+def success_by_task(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per task of a simulated evaluation (rows with an ``outcome``): episodes, successes, the
+    success rate and the mean summed reward, in the order the tasks first appear."""
+    tasks: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    for r in rows:
+        outcome = r.get("outcome")
+        if isinstance(outcome, dict) and outcome.get("success") is not None:
+            tasks[str(outcome.get("task"))].append(outcome)
+    out = []
+    for task, outcomes in tasks.items():
+        rewards = [o["sum_reward"] for o in outcomes if o.get("sum_reward") is not None]
+        n_success = sum(bool(o["success"]) for o in outcomes)
+        out.append({"task": task, "episodes": len(outcomes), "successes": n_success,
+                    "success_rate": n_success / len(outcomes),
+                    "mean_sum_reward": float(np.mean(rewards)) if rewards else None})
+    return out
 
 
 def prompt_pairs(entries: Iterable[tuple[Any, tuple, str, str]]) -> list[tuple[Any, Any]]:
