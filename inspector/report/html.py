@@ -322,14 +322,14 @@ def render_report_html(report: dict[str, Any], title: str | None = None,
     if rows:
         figures = "".join(figure_html(f) for f in report_figures(rows))
         body.append(
-            f"<h2>Summary</h2>{_summary(report)}{_errors(report) if not episodes else ''}"
+            f"<h2>Summary</h2>{_summary(report)}{_errors(report)}"
             f'<h2>Figures</h2><div class="figures">{figures}</div>'
             f"<h2>Rollouts</h2>{_table_tools(len(rows), 'filter', 'shown', 'filter rows (tag, prompt, kind ...)')}"
             f'<div class="table-wrap">{_table(rows, links)}</div>')
     if episodes:
         figures = "".join(figure_html(f) for f in episode_figures(episodes))
         body.append(
-            f"<h2>Dataset episodes</h2>{_episode_summary(episodes)}{_errors(report)}"
+            f"<h2>Dataset episodes</h2>{_episode_summary(episodes)}{_errors(report) if not rows else ''}"
             f'<div class="figures">{figures}</div>'
             f"<h2>Episodes</h2>{_table_tools(len(episodes), 'filter-episodes', 'shown-episodes', 'filter rows (task, dataset ...)')}"
             f'<div class="table-wrap">{_episode_table(episodes)}</div>')
