@@ -135,6 +135,11 @@ def test_index_as_strings_refused_by_report_and_export_alike(dataset: Path, tmp_
     assert list(out.iterdir()) == []
 
 
+def test_an_episode_listed_twice_is_refused(dataset: Path) -> None:
+    set_column(dataset / EPISODES_PARQUET, "episode_index", lambda v: [v[0], v[1], v[1]])
+    assert_one_line_error(inspector("info", dataset), "meta/episodes", "'episode_index' 1 is listed twice")
+
+
 def test_v21_index_as_strings_is_refused(fixtures_dir: Path, tmp_path: Path) -> None:
     root = Path(shutil.copytree(fixtures_dir / "lerobot" / "so101_v21", tmp_path / "v21"))
     lines = (root / "meta" / "episodes.jsonl").read_text().splitlines()

@@ -502,7 +502,7 @@ class LeRobotDataset:
         problem = fps_problem(self.info.get(FPS_KEY))
         if problem is not None:
             raise InspectorError(self._info_file, f"'{FPS_KEY}' {problem}")
-        return float(self.info[FPS_KEY])
+        return self.info[FPS_KEY]  # as written (30, not 30.0: `info` shows it)
 
     def _info_template(self, key: str, default: str) -> str:
         """A path template from info.json (LeRobot writes null for video_path without videos)."""
@@ -568,6 +568,10 @@ class LeRobotDataset:
     def _episode_map(self) -> dict[int, EpisodeInfo]:
         infos = self._load_episodes_v30() if self.codebase_version == V30 else self._load_episodes_v21()
         infos.sort(key=lambda e: e.index)
+        twice = next((a.index for a, b in zip(infos, infos[1:]) if a.index == b.index), None)
+        if twice is not None:  # which row would be the episode? neither silently
+            where = self.root / (V30_EPISODES_DIR if self.codebase_version == V30 else V21_EPISODES_PATH)
+            raise InspectorError(where, f"'{EPISODE_INDEX_KEY}' {twice} is listed twice")
         return {e.index: e for e in infos}
 
     @property
