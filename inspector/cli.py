@@ -9,10 +9,12 @@ What counts as bad input, per command:
   dataset's ``meta/`` files, a rollout directory named directly); a session's broken rollouts are
   listed under ``errors`` with exit 0 (info is how one finds out what is broken).
 - ``report``: exit 2 when a path is unusable or nothing could be reported (no rollouts, or every one
-  broken); otherwise exit 0, broken rollouts listed under ``errors``.
+  broken); otherwise exit 0, broken rollouts (and a dataset's broken episodes) listed under ``errors``.
 - ``compare``: as ``report`` for each side, and exit 2 when no rollout of A pairs with one of B.
 - ``export``: writes every rollout it can; each broken one prints its own ``error:`` line, leaves no
   file, and makes the exit code 2.
+- ``serve``: exit 2 when no path can be served; a path that cannot be opened among others is its
+  ``error:`` line on stderr and an error card in the app, and the others are served.
 """
 
 from __future__ import annotations

@@ -28,7 +28,7 @@ from ..data.episodes import EpisodeRef, episode_refs, episode_rollout
 from ..data.lerobot_dataset import dataset_name
 from ..data.session import Rollout, Session
 from ..data.sources import Sources, check_confined
-from ..errors import InspectorError
+from ..errors import InspectorError, one_line
 from ._frames import FrameCache, FrameStore
 from ._scene import RolloutScene
 
@@ -97,6 +97,10 @@ class Catalog:
             for ref in episode_refs(ds):
                 key = f"{name} / episode {ref.index} · {ref.length} frames ({ref.duration_s:.1f} s) · {ref.task}"
                 self.entries[key] = Entry(key, None, ref.tag, episode=ref)
+        for path, error in sources.unusable:  # a path given that could not be opened: its error card
+            label = one_line(path)
+            key = f"{label} (cannot be read)"
+            self.entries[key] = Entry(key, None, label, error)
         self._lock = threading.Lock()
         self._build_locks: dict[str, threading.Lock] = {}
         self._loaded: OrderedDict[str, Loaded] = OrderedDict()

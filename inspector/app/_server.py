@@ -165,8 +165,10 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
             raise InspectorError(BUNDLED_DEMO, "the bundled demo session is not built yet; build it with "
                                  "`inspector demo --rebuild`, or serve a session: `inspector serve PATH`")
         paths = [BUNDLED_DEMO]
-    # no link leads out of a root; datasets are browsed episode by episode
-    sources = open_sources(paths, dataset=dataset, confine=True, datasets=True, calibration=calibration)
+    # no link leads out of a root; datasets are browsed episode by episode; a path that cannot be
+    # opened is an error card, and the others are served
+    sources = open_sources(paths, dataset=dataset, confine=True, datasets=True, keep_going=True,
+                           calibration=calibration)
     try:
         app = InspectorApp(sources, host=host, port=port, cache_mb=cache_mb,
                            metrics_cache=MetricsCache(enabled=use_cache))
@@ -230,7 +232,9 @@ def _announce(app: InspectorApp, share: bool) -> None:
     """Say what is served where (and the share URL when asked for)."""
     sources = app.sources
     n_ok = sum(len(s.rollouts) for s in sources.sessions)
-    n_bad = sum(len(s.errors) for s in sources.sessions)
+    n_bad = sum(len(s.errors) for s in sources.sessions) + len(sources.unusable)
+    for _, error in sources.unusable:
+        print(f"error: {error}", file=sys.stderr, flush=True)
     served = [f"{n_ok} rollout(s) from {len(sources.sessions)} session(s)"] if sources.sessions else []
     if sources.datasets:
         n_eps = sum(len(d.episodes) for d in sources.datasets)

@@ -61,7 +61,7 @@ import numpy.typing as npt
 from ..errors import InspectorError
 from ..units import JOINT_NAMES, Units, canonical_joint_name, guess_arm_units, joint_order, parse_units
 from .hub import fetch_dataset
-from .session import ABSURD_VALUE
+from .session import ABSURD_VALUE, fps_problem
 from .video import VideoClip
 
 # --- versions -------------------------------------------------------------------------------------
@@ -148,6 +148,10 @@ def dataset_name(ds: LeRobotDataset) -> str:
     """How a dataset is named in pickers and reports: ``org/name`` under a LeRobot home, else its
     directory's name."""
     root = ds.root.resolve()
+    repo = hub_snapshot_repo(root)
+    if repo is not None:  # datasets--org--name
+        org, _, name = repo.name[len(HUB_REPO_PREFIX):].partition("--")
+        return f"{org}/{name}" if name else org
     for home in lerobot_home_dirs():
         try:
             rel = root.relative_to(home.resolve())
@@ -156,6 +160,32 @@ def dataset_name(ds: LeRobotDataset) -> str:
         if len(rel.parts) == 2:
             return "/".join(rel.parts)
     return root.name
+
+
+# The Hugging Face hub cache (``huggingface_hub.snapshot_download``) keeps a dataset as
+#   <hub>/datasets--<org>--<name>/snapshots/<revision>/...   every file a symlink into
+#   <hub>/datasets--<org>--<name>/blobs/<hash>               the files' contents
+HUB_REPO_PREFIX = "datasets--"
+HUB_SNAPSHOTS_DIR = "snapshots"
+HUB_BLOBS_DIR = "blobs"
+
+
+def hub_snapshot_repo(root: Path) -> Path | None:
+    """The hub cache repository directory (``datasets--<org>--<name>``) of a dataset that is one
+    of its snapshots, else None."""
+    snapshots = root.parent
+    repo = snapshots.parent
+    if snapshots.name == HUB_SNAPSHOTS_DIR and repo.name.startswith(HUB_REPO_PREFIX) and (repo / HUB_BLOBS_DIR).is_dir():
+        return repo
+    return None
+
+
+def dataset_file_roots(root: Path) -> list[Path]:
+    """The directories a dataset's files may resolve into: the dataset itself, and for a hub
+    cache snapshot the ``blobs/`` directory its files are symlinks into (nothing else of the
+    cache: not other repositories)."""
+    repo = hub_snapshot_repo(root)
+    return [root] if repo is None else [root, repo / HUB_BLOBS_DIR]
 
 
 def lerobot_home_dirs() -> list[Path]:
@@ -402,7 +432,7 @@ class LeRobotDataset:
         info = self._read_info()
         self.info: dict[str, Any] = info
         self.codebase_version: str = info[CODEBASE_VERSION_KEY]
-        self.fps: float = self._info_number(FPS_KEY, positive=True)
+        self.fps: float = self._info_fps()
         self.robot_type: str | None = info.get(ROBOT_TYPE_KEY)
         self.features: dict[str, dict[str, Any]] = info[FEATURES_KEY]
         self.num_episodes: int = int(self._info_number(TOTAL_EPISODES_KEY))
@@ -474,6 +504,12 @@ class LeRobotDataset:
                                                   f" number, found {value!r}")
         return value
 
+    def _info_fps(self) -> float:
+        problem = fps_problem(self.info.get(FPS_KEY))
+        if problem is not None:
+            raise InspectorError(self._info_file, f"'{FPS_KEY}' {problem}")
+        return self.info[FPS_KEY]  # as written (30, not 30.0: `info` shows it)
+
     def _info_template(self, key: str, default: str) -> str:
         """A path template from info.json (LeRobot writes null for video_path without videos)."""
         value = self.info.get(key)
@@ -505,15 +541,35 @@ class LeRobotDataset:
 
     @property
     def units(self) -> Units:
-        """Joint units: stated in info.json, or guessed from the first episode's state and action
-        (read on first access; :attr:`units_reason` says why)."""
+        """Joint units: stated in info.json, or guessed from the first episode whose joints read
+        (read on first access; :attr:`units_reason` says why). A broken episode is skipped here,
+        so it fails alone when it is read, not every episode with it.
+
+        Raises:
+            InspectorError: every episode's joints are unreadable (the first one's error).
+        """
         if self._units is None:
-            if not self.episodes:
-                self._units, self.units_reason = Units(guessed=True), "no episodes; assuming degrees"
+            first_error: InspectorError | None = None
+            for info in self.episodes:
+                try:
+                    state, action, _ = self._read_joints(info)
+                except InspectorError as exc:
+                    first_error = first_error or exc
+                    continue
+                self._guess_units(info, state, action)
+                break
             else:
-                state, action, _ = self._read_joints(self.episodes[0])
-                self._units, self.units_reason = guess_arm_units(np.concatenate([state, action]))
+                if first_error is not None:
+                    raise first_error
+                self._units, self.units_reason = Units(guessed=True), "no episodes; assuming degrees"
+        assert self._units is not None
         return self._units
+
+    def _guess_units(self, info: EpisodeInfo, state: npt.NDArray[np.float64], action: npt.NDArray[np.float64]) -> None:
+        units, reason = guess_arm_units(np.concatenate([state, action]))
+        if info is not self.episodes[0]:
+            reason += f" (from episode {info.index}: the episodes before it are unreadable)"
+        self._units, self.units_reason = units, reason
 
     # --- episode metadata -------------------------------------------------------------------------
 
@@ -521,6 +577,10 @@ class LeRobotDataset:
     def _episode_map(self) -> dict[int, EpisodeInfo]:
         infos = self._load_episodes_v30() if self.codebase_version == V30 else self._load_episodes_v21()
         infos.sort(key=lambda e: e.index)
+        twice = next((a.index for a, b in zip(infos, infos[1:]) if a.index == b.index), None)
+        if twice is not None:  # which row would be the episode? neither silently
+            where = self.root / (V30_EPISODES_DIR if self.codebase_version == V30 else V21_EPISODES_PATH)
+            raise InspectorError(where, f"'{EPISODE_INDEX_KEY}' {twice} is listed twice")
         return {e.index: e for e in infos}
 
     @property
@@ -582,10 +642,7 @@ class LeRobotDataset:
         infos: list[EpisodeInfo] = []
         for f in files:
             try:
-                names = pq.read_schema(f).names
-                missing = [c for c in needed if c not in names]
-                if missing:
-                    raise InspectorError(f, f"missing column(s) {missing}")
+                _check_index_columns(f, pq.read_schema(f), needed)
                 rows = pq.read_table(f, columns=needed).to_pylist()  # skip the wide stats/ columns
             except InspectorError:
                 raise
@@ -613,12 +670,12 @@ class LeRobotDataset:
         f = self.root / V21_EPISODES_PATH
         infos: list[EpisodeInfo] = []
         for line_no, row in _read_jsonl(f):
-            try:
-                ep, length = int(row[EPISODE_INDEX_KEY]), int(row[EP_LENGTH])
-                tasks = [str(t) for t in row.get(EP_TASKS) or []]
-            except (KeyError, TypeError, ValueError, OverflowError):
+            ep, length = row.get(EPISODE_INDEX_KEY), row.get(EP_LENGTH)
+            if not (_is_whole(ep) and _is_whole(length)):
                 raise InspectorError(f, f"line {line_no}: needs integer '{EPISODE_INDEX_KEY}' and "
-                                        f"'{EP_LENGTH}'") from None
+                                        f"'{EP_LENGTH}', found {ep!r} and {length!r}")
+            assert isinstance(ep, int) and isinstance(length, int)
+            tasks = [str(t) for t in row.get(EP_TASKS) or []] if isinstance(row.get(EP_TASKS), list) else []
             _check_episode(f, f"line {line_no}", ep, length)
             chunk = ep // self.chunks_size
             data_file = self._format_path(DATA_PATH_KEY, self.data_path, episode_chunk=chunk,
@@ -733,7 +790,7 @@ class LeRobotDataset:
         info = self.episode_info(index)
         state, action, cols = self._read_joints(info)
         if self._units is None and info is self.episodes[0]:
-            self._units, self.units_reason = guess_arm_units(np.concatenate([state, action]))
+            self._guess_units(info, state, action)
         return Episode(index=info.index, fps=float(self.fps), length=info.length, task=info.task,
                        timestamps=cols[TIMESTAMP_KEY], frame_index=cols[FRAME_INDEX_KEY], state=state,
                        action=action, units=self.units, cameras=list(self.cameras), videos=dict(info.videos),
@@ -804,6 +861,40 @@ def _read_jsonl(f: Path) -> list[tuple[int, dict[str, Any]]]:
             raise InspectorError(f, f"line {line_no}: expected a JSON object")
         out.append((line_no, row))
     return out
+
+
+def _check_index_columns(f: Path, schema: Any, needed: list[str]) -> None:
+    """The v3.0 episode index holds every column it needs, each of its expected type: whole
+    numbers for indexes and lengths, numbers for timestamps, lists of strings for tasks. Checked
+    on the file's schema, once for all its rows, so a wrong-typed column (an episode index
+    written as strings) is one line naming it, not a comparison failing deep in the reader.
+
+    Raises:
+        InspectorError: naming ``f`` and the first column missing or of the wrong type.
+    """
+    import pyarrow as pa
+
+    missing = [c for c in needed if c not in schema.names]
+    if missing:
+        raise InspectorError(f, f"missing column(s) {missing}")
+    for name in needed:
+        typ = schema.field(name).type
+        if name == EP_TASKS:
+            ok = pa.types.is_null(typ) or ((pa.types.is_list(typ) or pa.types.is_large_list(typ))
+                                           and (pa.types.is_string(typ.value_type)
+                                                or pa.types.is_large_string(typ.value_type)))
+            expected = "a list of task strings"
+        elif name.endswith(("from_timestamp", "to_timestamp")):
+            ok, expected = pa.types.is_floating(typ) or pa.types.is_integer(typ), "numbers [s]"
+        else:
+            ok, expected = pa.types.is_integer(typ), "whole numbers"
+        if not ok:
+            raise InspectorError(f, f"column '{name}': expected {expected}, found {typ}")
+
+
+def _is_whole(value: Any) -> bool:
+    """An integer, and not a bool (JSON's ``true`` is no episode index)."""
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
 def _check_episode(f: Path, where: str, index: Any, length: Any) -> None:

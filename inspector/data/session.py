@@ -67,6 +67,21 @@ _VIEW = _TAG
 # Joint values beyond this are no angle or gripper reading; it also keeps every squared distance
 # the metrics take far below float64's overflow (~1e154 per value).
 ABSURD_VALUE = 1e100
+# Frame rates outside these are no camera's or robot's (LeRobot records at 10-60 fps); beyond
+# them step times and video timestamps overflow or collapse (1e308 fps, 1e-300 fps) [frames/s].
+MIN_FPS = 0.001
+MAX_FPS = 1000.0
+
+
+def fps_problem(value: object) -> str | None:
+    """What is wrong with ``value`` as a frame rate [frames/s], or None when it is one: a number
+    (not a bool) in [:data:`MIN_FPS`, :data:`MAX_FPS`]."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return f"must be a number of frames per second, found {value!r}"
+    if not MIN_FPS <= value <= MAX_FPS:  # NaN included: it compares false
+        shown = f"{value:g}" if isinstance(value, float) or abs(value) < 10 ** 15 else "an integer past 1e15"
+        return f"must lie in [{MIN_FPS:g}, {MAX_FPS:g}] frames per second, found {shown}"
+    return None
 
 
 # ----------------------------------------------------------------------------------------------
@@ -382,7 +397,8 @@ def load_rollout(root: str | Path, units: Units | None = None, lazy: bool = Fals
         require(value >= 1, meta_path, f"{name}: must be >= 1, found {value}")
     require(executed <= horizon, meta_path,
             f"executed_per_chunk: {executed} exceeds horizon {horizon}")
-    require(np.isfinite(fps) and fps > 0, meta_path, f"fps: must be > 0, found {fps}")
+    problem = fps_problem(fps)
+    require(problem is None, meta_path, f"fps: {problem}")
     require(start_frame >= 0, meta_path, f"start_frame: must be >= 0, found {start_frame}")
     require(episode_index is None or episode_index >= 0, meta_path,
             f"episode_index: must be >= 0, found {episode_index}")

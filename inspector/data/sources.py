@@ -23,7 +23,7 @@ from .importers.dreamzero_so101 import find_sources, load_in_memory
 from .importers.groot_dreams import LAYOUT_HINT as GROOT_DREAMS_HINT
 from .importers.groot_dreams import LAYOUT_TITLE as GROOT_DREAMS_TITLE
 from .importers.groot_dreams import is_groot_dreams, open_trajectories
-from .lerobot_dataset import INFO_PATH, REPO_ID, find_dataset, is_lerobot_dataset, open_dataset
+from .lerobot_dataset import INFO_PATH, REPO_ID, dataset_file_roots, find_dataset, is_lerobot_dataset, open_dataset
 from .session import Rollout, Session, is_rollout, is_session, open_session
 
 # What a PATH may be besides a session, for the error a path none of them fits gets.
@@ -43,6 +43,8 @@ class Sources:
     sessions: list[Session] = field(default_factory=list)
     roots: list[Path] = field(default_factory=list)
     datasets: list = field(default_factory=list)  # LeRobotDataset, their episodes browsed on their own
+    # (path as given, why) of the paths that could not be opened (``open_sources(keep_going=True)``)
+    unusable: list[tuple[str, InspectorError]] = field(default_factory=list)
     _temps: list[tempfile.TemporaryDirectory] = field(default_factory=list, repr=False)
 
     def rollouts(self) -> Iterator[tuple[Session, Rollout]]:
@@ -62,7 +64,7 @@ class Sources:
 
 def open_sources(paths: Sequence[str | Path], dataset: str | Path | None = None,
                  confine: bool = False, lazy: bool = False, datasets: bool = False,
-                 calibration: str | None = None) -> Sources:
+                 calibration: str | None = None, keep_going: bool = False) -> Sources:
     """Open each path as a session (a rollout path opens its session filtered to that rollout).
 
     A session named more than once (itself, or several of its rollouts) is opened once, holding
@@ -76,19 +78,29 @@ def open_sources(paths: Sequence[str | Path], dataset: str | Path | None = None,
         lazy: read rollouts' arrays on first use (``open_session(..., lazy=True)``).
         datasets: also take LeRobot datasets (a directory, or ``org/name`` in the local LeRobot
             cache) and GR00T-Dreams neural trajectories into ``Sources.datasets`` (only their
-            metadata is read).
+            metadata and episode index are read).
         calibration: a GR00T-Dreams dump's calibration (``--calibration``; None: its default).
+        keep_going: a path that cannot be opened goes to ``Sources.unusable`` and the others
+            open (the app serves what it can); only when none opens is its error raised.
 
     Raises:
         InspectorError: a path is missing or is none of the above (or, confined, its
-            ``session.json`` resolves outside the session directory).
+            ``session.json`` resolves outside the session directory); with ``keep_going``, only
+            when every path is.
     """
     out = Sources()
     try:
         for raw in paths:
-            if datasets and _open_dataset(out, raw, confine, calibration):
-                continue
-            _open_one(out, raw, dataset, confine, lazy)
+            try:
+                if datasets and _open_dataset(out, raw, confine, calibration):
+                    continue
+                _open_one(out, raw, dataset, confine, lazy)
+            except InspectorError as exc:
+                if not keep_going:
+                    raise
+                out.unusable.append((str(raw), exc))
+        if out.unusable and not out.sessions and not out.datasets:
+            raise out.unusable[0][1]
     except BaseException:
         out.close()  # temporary sessions of the paths already opened
         raise
@@ -180,13 +192,15 @@ def _open_dataset(out: Sources, raw: str | Path, confine: bool, calibration: str
             raise InspectorError(path, f"not found: no such path, and {exc.what}") from None
     else:
         return False
+    # a hub cache snapshot's files are symlinks into the repository's blobs/: read there too
+    allowed = dataset_file_roots(root)
     if confine:
-        check_confined(root / INFO_PATH, [root])
+        check_confined(root / INFO_PATH, allowed)
     ds = open_dataset(root)
     _ = ds.episodes  # the index: read now, so a broken one is refused now
     if all(d.root != ds.root for d in out.datasets):
         out.datasets.append(ds)
-        out.roots.append(root)
+        out.roots.extend(allowed)
     return True
 
 

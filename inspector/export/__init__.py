@@ -5,9 +5,15 @@
 
 from __future__ import annotations
 
+import os
 from typing import TYPE_CHECKING
 
 from .._lazy import attach
+
+# Rerun's native logger reads RUST_LOG once, when rerun is first imported (by this package's
+# modules): unless the user set it, only its errors reach stderr, so a failed export stays the one
+# ``error:`` line of the contract rather than being followed by rerun's coloured warnings.
+os.environ.setdefault("RUST_LOG", "error")
 
 __getattr__, __dir__, __all__ = attach(__name__, {
     "write_recording": ".recording",

@@ -86,8 +86,8 @@ def write_recording(timeline: RolloutTimeline, path: str | Path, views: Sequence
     # Encoded in memory (a few MB) and written by us: a write error (disk full, permission) is
     # then an ordinary OSError naming the file, not a log line from rerun's writer thread.
     rec = rr.RecordingStream(application_id=application_id(timeline.tag))
+    stream = rec.binary_stream()  # type: ignore[misc]  # rerun binds a module function as this method
     try:
-        stream = rec.binary_stream()  # type: ignore[misc]  # rerun binds a module function as this method
         # Active, not only default: in this stream the layout follows the recording's first
         # message, and a viewer that has already laid the recording out by heuristics keeps that
         # layout over a mere default (Rerun's web viewer does).
@@ -96,6 +96,12 @@ def write_recording(timeline: RolloutTimeline, path: str | Path, views: Sequence
         rec.send_recording_name(f"{session.name}/{timeline.tag}" if session is not None else timeline.tag)
         _log_recording(rec, timeline, views, psnr, report)
         data = stream.read() or b""
+    except BaseException:
+        # A failed recording is dropped by us: what was logged is taken out of the stream, so
+        # disconnecting drops nothing (rerun would log that drop on stderr, after our error line).
+        with contextlib.suppress(Exception):
+            stream.read()
+        raise
     finally:
         rec.disconnect()
     write_file_atomic(path, data)

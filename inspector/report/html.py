@@ -1,5 +1,9 @@
 """``inspector report --html OUT.html``: the whole evaluation in one file that opens offline.
 
+A report of LeRobot datasets (``report DATASET --html``) gets the same page for its episodes:
+their tracking-error figures (:mod:`inspector.report.episode_figures`) and a table of episodes;
+rollouts and episodes reported together each get their section.
+
 Everything is inline: the stylesheets (``chart.css`` for the figures, shared with the app's
 overview, and ``report.css``) and a small script (``assets/``), the figures as SVG
 (:mod:`inspector.report.figures`), the table as HTML. Nothing is fetched from the network, and the
@@ -15,6 +19,7 @@ from __future__ import annotations
 
 import datetime
 import os
+import re
 import tempfile
 from collections.abc import Callable, Sequence
 from html import escape
@@ -23,6 +28,8 @@ from pathlib import Path
 from typing import Any, cast
 from urllib.parse import quote
 
+from ..units import JOINT_NAMES
+from .episode_figures import episode_figures, episode_key, episode_summary_numbers
 from .figures import Figure, report_figures
 from .svg import legend_html
 
@@ -115,9 +122,8 @@ def _table(rows: Sequence[Row], links: dict[int, str]) -> str:
         if i in links:
             tag = f'<a href="{escape(links[i])}" title="Rerun recording">{tag}</a>'
         cells = [f"<td class=t>{tag}</td>"]
-        for header, _, num, cell in cols:  # numbers align right (the default), text left
-            cls = "" if num else (' class="t prompt"' if header == "prompt" else " class=t")
-            cells.append(f"<td{cls}>{escape(cell(r))}</td>")
+        for header, _, num, cell in cols:
+            cells.append(f"<td{_cell_class(header, num)}>{escape(cell(r))}</td>")
         out.append(f'<tr data-key="{i}">{"".join(cells)}</tr>')
     out.append("</tbody></table>")
     return "".join(out)
@@ -152,10 +158,22 @@ def _summary(report: dict[str, Any]) -> str:
                          f"paths indistinguishable {collapse}")
         out.append(_details(f"Prompt divergence: {len(divergences)} pair(s) from the same start, "
                             f"{collapsed} collapsing onto one path", items, "plain"))
+    return "".join(out)
+
+
+# An episode's key in ``errors`` is ``<dataset>/episode_<index>`` (inspector.data.episodes.episode_tag).
+_EPISODE_ERROR_KEY = re.compile(r"/episode_\d+$")
+
+
+def _errors(report: dict[str, Any]) -> str:
+    """What could not be reported: rollouts and episodes, each with its error line."""
     errors = report.get("errors", {})
-    if errors:
-        out.append(_details(f"{len(errors)} rollout(s) not reported",
-                            [f"{escape(name)}: {escape(err)}" for name, err in errors.items()], "plain errors"))
+    out = []
+    for what, keep in (("rollout", lambda k: not _EPISODE_ERROR_KEY.search(k)),
+                       ("episode", lambda k: bool(_EPISODE_ERROR_KEY.search(k)))):
+        items = [f"{escape(name)}: {escape(err)}" for name, err in errors.items() if keep(name)]
+        if items:
+            out.append(_details(f"{len(items)} {what}(s) not reported", items, "plain errors"))
     return "".join(out)
 
 
@@ -195,25 +213,129 @@ _DEFINITIONS = [
 ]
 
 
-def render_report_html(report: dict[str, Any], title: str = "Evaluation report",
+_EPISODE_DEFINITIONS = [
+    ("tracking error", "|action - state| per frame: the commanded (leader) arm against the measured (follower) "
+                       "arm; L2 over the 6 joints, or per joint (RMSE over the episode's frames)."),
+    ("EE mm", "distance between the commanded and the measured arm's end effector (forward kinematics) [mm]."),
+    ("lim.steps meas / cmd", "frames where the measured / commanded arm has a joint past its URDF limit "
+                             "(beyond the margin)."),
+]
+
+
+def _episode_columns() -> list[tuple[str, str, bool, Callable[[Row], str]]]:
+    """(header, tooltip, numeric, cell text) of each column of the episode table."""
+    def track(field: str) -> Callable[[Row], str]:
+        return lambda r: _f(r["tracking_error"][field], ".2f")
+
+    def worst_joint(r: Row) -> str:
+        rmse = r["tracking_error"].get("rmse")
+        return "-" if not rmse else max(zip(rmse, JOINT_NAMES))[1]
+
+    return [
+        ("dataset", "dataset name", False, lambda r: str(r["dataset"])),
+        ("ep", "episode index", True, lambda r: _f(r["episode_index"], "d")),
+        ("frames", "frames in the episode", True, lambda r: _f(r["length"], "d")),
+        ("s", "duration [s]", True, lambda r: _f(r["duration_s"], ".1f")),
+        ("track mean", "tracking error, L2 over the joints, mean over frames [deg]", True, track("l2_mean")),
+        ("max", "tracking error, L2 over the joints, max over frames [deg]", True, track("l2_max")),
+        ("worst joint", "the joint with the largest tracking RMSE", False, worst_joint),
+        ("worst RMSE", "that joint's tracking RMSE", True,
+         lambda r: _f(max(r["tracking_error"].get("rmse") or [None], key=lambda v: -1 if v is None else v), ".2f")),
+        ("EE mm", "end-effector tracking error, mean [mm]", True, lambda r: _f(r["ee_tracking_error_mm"]["mean"], ".1f")),
+        ("lim.steps meas", "frames with a measured joint past its limit", True,
+         lambda r: str(r["limit_violations"]["measured"]["steps"])),
+        ("lim.steps cmd", "frames with a commanded joint past its limit", True,
+         lambda r: str(r["limit_violations"]["commanded"]["steps"])),
+        ("task", "the episode's task", False, lambda r: r["task"] or ""),
+    ]
+
+
+def _cell_class(header: str, numeric: bool) -> str:
+    """Numbers align right (the default), text left; the long text column wraps."""
+    if numeric:
+        return ""
+    return ' class="t prompt"' if header in ("prompt", "task") else " class=t"
+
+
+def _episode_table(rows: Sequence[Row]) -> str:
+    cols = _episode_columns()
+    head = "".join(f'<th{" class=num" if num else ""} title="{escape(tip)}">{escape(h)}</th>' for h, tip, num, _ in cols)
+    out = [f'<table id="episodes"><thead><tr>{head}</tr></thead><tbody>']
+    for i, r in enumerate(rows):
+        cells = "".join(f"<td{_cell_class(h, num)}>{escape(cell(r))}</td>" for h, _, num, cell in cols)
+        out.append(f'<tr data-key="{episode_key(i)}">{cells}</tr>')
+    out.append("</tbody></table>")
+    return "".join(out)
+
+
+def _episode_summary(rows: Sequence[Row]) -> str:
+    n = episode_summary_numbers(rows)
+    worst = n["worst"]
+    cards = [(str(n["n"]), f"episodes ({n['frames']} frames)"),
+             (_f(n["mean_l2"], ".2f"), "mean tracking error, L2 [deg]"),
+             (f"{worst['tracking_error']['l2_mean']:.2f}", f"worst: {escape(str(worst['dataset']))} "
+                                                           f"episode {worst['episode_index']} [deg]"),
+             (str(n["past_limits"]), "episodes with the measured arm past a joint limit")]
+    out = ['<div class="cards">']
+    out += [f'<div class="card"><div class="v">{escape(v)}</div><div class="k">{k}</div></div>' for v, k in cards]
+    out.append("</div>")
+    return "".join(out)
+
+
+def _table_tools(n: int, filter_id: str, shown_id: str, placeholder: str) -> str:
+    return (f'<div class="table-tools"><input id="{filter_id}" type="search" placeholder="{escape(placeholder)}" '
+            f'aria-label="filter rows"><span><span id="{shown_id}">{n}</span> of {n} shown; '
+            f"click a header to sort</span></div>")
+
+
+def render_report_html(report: dict[str, Any], title: str | None = None,
                        sources: Sequence[str] = (), rrd_links: dict[int, str] | None = None) -> str:
     """The page of a report (:func:`inspector.report.build.build_report`'s result) as one HTML string.
 
     Args:
-        report: the report.
-        title: the page's heading.
+        report: the report: its rollouts, its dataset episodes, or both (each gets its section).
+        title: the page's heading (default: "Evaluation report", or "Dataset report" for
+            episodes alone).
         sources: the paths the report was made from (shown under the heading).
         rrd_links: row index -> link of its ``.rrd`` (:func:`find_rrd_links`).
+
+    Raises:
+        ValueError: the report has neither rollouts nor episodes (``build_report`` never
+            returns such a report).
     """
     rows = report["rollouts"]
+    episodes = report.get("episodes", [])
+    if not rows and not episodes:
+        raise ValueError("a report without rollouts or episodes has no page")
+    title = title or ("Evaluation report" if rows else "Dataset report")
     links = rrd_links or {}
-    sessions = sorted({str(r.get("session")) for r in rows})
     when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    meta = (f"{len(rows)} rollout(s) from session(s) {escape(', '.join(sessions))}"
-            + (f" ({escape(', '.join(map(str, sources)))})" if sources else "")
+    what = []
+    if rows:
+        sessions = sorted({str(r.get("session")) for r in rows})
+        what.append(f"{len(rows)} rollout(s) from session(s) {escape(', '.join(sessions))}")
+    if episodes:
+        datasets = list(dict.fromkeys(str(e["dataset"]) for e in episodes))
+        what.append(f"{len(episodes)} episode(s) of dataset(s) {escape(', '.join(datasets))}")
+    meta = (" and ".join(what) + (f" ({escape(', '.join(map(str, sources)))})" if sources else "")
             + f" &middot; inspector {escape(_version())} &middot; {when}")
-    figures = "".join(figure_html(f) for f in report_figures(rows))
-    defs = "".join(f"<dt>{escape(k)}</dt><dd>{escape(v)}</dd>" for k, v in _DEFINITIONS)
+    body = []
+    if rows:
+        figures = "".join(figure_html(f) for f in report_figures(rows))
+        body.append(
+            f"<h2>Summary</h2>{_summary(report)}{_errors(report)}"
+            f'<h2>Figures</h2><div class="figures">{figures}</div>'
+            f"<h2>Rollouts</h2>{_table_tools(len(rows), 'filter', 'shown', 'filter rows (tag, prompt, kind ...)')}"
+            f'<div class="table-wrap">{_table(rows, links)}</div>')
+    if episodes:
+        figures = "".join(figure_html(f) for f in episode_figures(episodes))
+        body.append(
+            f"<h2>Dataset episodes</h2>{_episode_summary(episodes)}{_errors(report) if not rows else ''}"
+            f'<div class="figures">{figures}</div>'
+            f"<h2>Episodes</h2>{_table_tools(len(episodes), 'filter-episodes', 'shown-episodes', 'filter rows (task, dataset ...)')}"
+            f'<div class="table-wrap">{_episode_table(episodes)}</div>')
+    definitions = (_DEFINITIONS if rows else []) + (_EPISODE_DEFINITIONS if episodes else [])
+    defs = "".join(f"<dt>{escape(k)}</dt><dd>{escape(v)}</dd>" for k, v in definitions)
     return (
         "<!DOCTYPE html>\n"
         '<html lang="en"><head><meta charset="utf-8">'
@@ -223,12 +345,7 @@ def render_report_html(report: dict[str, Any], title: str = "Evaluation report",
         "style-src 'unsafe-inline'; script-src 'unsafe-inline'; img-src data:\">"
         f"<title>{escape(title)}</title><style>{_asset('chart.css')}{_asset('report.css')}</style></head><body>"
         f"<h1>{escape(title)}</h1><p class=\"meta\">{meta}</p>"
-        f"<h2>Summary</h2>{_summary(report)}"
-        f'<h2>Figures</h2><div class="figures">{figures}</div>'
-        f'<h2>Rollouts</h2><div class="table-tools"><input id="filter" type="search" '
-        f'placeholder="filter rows (tag, prompt, kind ...)" aria-label="filter rows">'
-        f'<span><span id="shown">{len(rows)}</span> of {len(rows)} shown; click a header to sort</span></div>'
-        f'<div class="table-wrap">{_table(rows, links)}</div>'
+        + "".join(body) +
         f'<h2>Definitions</h2><dl class="defs">{defs}</dl>'
         f"<script>{_asset('report.js')}</script></body></html>\n")
 
