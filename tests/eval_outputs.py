@@ -33,7 +33,7 @@ def camera_level(step: int) -> int:
 
 
 def flat(level: int, h: int = H, w: int = W) -> np.ndarray:
-    return np.full((h, w, 3), level, np.uint8)
+    return np.full((h, w, 3), level % 256, np.uint8)  # levels wrap past 255 in long episodes
 
 
 @dataclass

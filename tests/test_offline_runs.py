@@ -257,3 +257,15 @@ def test_a_directory_no_layout_fits_names_the_layouts(tmp_path):
 
 def test_joint_names_order_is_the_sessions(session):
     assert session.joint_names == list(JOINT_NAMES)
+
+
+def test_a_run_too_long_to_hold_is_cut_view_by_view(runs, tmp_path, monkeypatch):
+    """Past the memory budget each view streams from its own pass over the mosaic: same frames."""
+    import inspector.data.importers.dreamzero_offline as offline
+
+    root, _ = runs
+    monkeypatch.setattr(offline, "VIEWS_IN_MEMORY_BYTES", 0)
+    dest, _ = import_offline(root / "ar3", tmp_path / "s", log=lambda _: None)
+    frames = VideoClip(open_session(dest).rollouts["ar3"].video_path("front")).decode()
+    assert len(frames) == 25
+    assert all(abs(frames[f].mean() - front_level(f)) < 4 for f in range(25))

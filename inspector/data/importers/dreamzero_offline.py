@@ -57,6 +57,9 @@ FRAMES_PER_DECODED_CHUNK = 9
 # only its playback speed) [Hz].
 DEFAULT_ACTION_FPS = 30.0
 UNITS = Units("degrees")
+# The three views of a run held at once while importing it (a 60-chunk run's 481 frames take
+# ~245 MB); a longer run is cut view by view, decoding the mosaic three times [bytes].
+VIEWS_IN_MEMORY_BYTES = 256 * 1024 * 1024
 
 
 @dataclass
@@ -318,12 +321,29 @@ def iter_view_frames(run: OfflineRun, view: str) -> Iterator[npt.NDArray[np.uint
             raise InspectorError(f, f"cannot read image ({exc})") from None
 
 
+def _all_views(run: OfflineRun) -> dict[str, list[npt.NDArray[np.uint8]]]:
+    """Every view's frames from one pass over the mosaic (decoding it once, not once per view)."""
+    assert run.video is not None
+    views: dict[str, list[npt.NDArray[np.uint8]]] = {v: [] for v, _, _ in MOSAIC_VIEWS}
+    for _, frame in VideoClip(run.video).iter_frames():
+        h, w = frame.shape[0] // 2, frame.shape[1] // 2
+        for view, row, col in MOSAIC_VIEWS:
+            views[view].append(np.ascontiguousarray(frame[row * h:(row + 1) * h, col * w:(col + 1) * w]))
+    return views
+
+
 def _write_views(run: OfflineRun, scratch: Path, fps: float) -> dict[str, Path]:
-    """Each view as its own H.264 file in ``scratch`` (streamed: one frame in memory at a time)."""
+    """Each view as its own H.264 file in ``scratch``: cut from one decode of the mosaic when the
+    three views fit :data:`VIEWS_IN_MEMORY_BYTES`, else streamed view by view (one frame at a time)."""
+    held = None
+    if run.video is not None:
+        info = probe(run.video)
+        if run.n_frames * info.width * info.height * 3 * 3 // 4 <= VIEWS_IN_MEMORY_BYTES:
+            held = _all_views(run)
     out = {}
     for view, _, _ in MOSAIC_VIEWS:
         dest = scratch / f"{view}.mp4"
-        n = encode_h264(dest, iter_view_frames(run, view), fps)
+        n = encode_h264(dest, held[view] if held is not None else iter_view_frames(run, view), fps)
         require(n == run.n_frames, run.video or run.path / FRAMES_DIR / view,
                 f"{view}: {n} frames decoded, {run.n_frames} counted")
         out[view] = dest
