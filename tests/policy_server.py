@@ -51,6 +51,8 @@ class PolicyServer:
     horizon: int = 24
     faults: dict[int, str] = field(default_factory=dict)
     slow_s: float = 3.0
+    scale: float = 1.0  # the ramp's scale (a "worse checkpoint" answers a steeper one)
+    delay_s: float = 0.0  # every infer waits this long first
     video: tuple[int, int, int] | None = None  # (T, H, W) predicted frames under "video" (map form)
     echo: bool = False  # answer a fixed chunk at once, nothing recorded (benchmark)
     infers: list[Received] = field(default_factory=list)
@@ -67,7 +69,7 @@ class PolicyServer:
     def reply(self, obs: dict[str, Any], fault: str | None) -> Any:
         state = np.concatenate([np.asarray(obs["observation/joint_position"], np.float64),
                                 np.asarray(obs["observation/gripper_position"], np.float64)])
-        chunk = (state + ramp(self.horizon)).astype(np.float32)
+        chunk = (state + self.scale * ramp(self.horizon)).astype(np.float32)
         if fault == "shape":
             chunk = np.zeros((self.horizon, 8), np.float32)
         if fault == "nan":
@@ -117,6 +119,8 @@ class PolicyServer:
                     return
                 if fault == "slow":
                     time.sleep(self.slow_s)
+                if self.delay_s:
+                    time.sleep(self.delay_s)
                 ws.send(packb(self.reply(obs, fault)))
             except ConnectionClosed:
                 return

@@ -74,7 +74,8 @@ def map_cameras(config: ServerConfig, cameras: list[str], overrides: Mapping[str
         if name not in cameras:
             raise InspectorError("--camera", f"{key}={name}: the dataset has no camera {name!r}; cameras: {cameras}")
     needed = server_camera_keys(config)
-    free = [c for c in cameras if c not in overrides.values()]
+    # a camera set for one of the server's keys is taken; one sent under an extra key is not
+    free = [c for c in cameras if c not in {v for k, v in overrides.items() if k in needed}]
     mapping: dict[str, str] = {}
     wrist_keys = [k for k in needed if "wrist" in k and k not in overrides]
     for key in wrist_keys:  # a wrist camera to each wrist key, by name
