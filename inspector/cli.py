@@ -106,7 +106,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
     model = {k: v for k, v in (("name", args.model), ("checkpoint", args.checkpoint)) if v is not None}
     plan = EvalPlan(server=args.server, dataset=args.dataset, output=args.output, episodes=args.episodes,
-                    samples=args.samples or 8, frames=args.frames, cameras=dict(args.camera or []),
+                    samples=args.samples or 8, frames=args.frames, every_chunk=args.every_chunk,
+                    cameras=dict(args.camera or []),
                     prompt=args.prompt, timeout_s=args.timeout, resume=args.resume,
                     executed_per_chunk=args.executed_per_chunk,
                     video_keys=dict(args.video) if args.video else None, model=model)
@@ -353,6 +354,9 @@ def build_parser() -> argparse.ArgumentParser:
     how.add_argument("--samples", type=_positive_int, metavar="N",
                      help="N start frames evenly spaced in each episode (default 8)")
     how.add_argument("--frames", type=_index_list, metavar="LIST", help="these start frames in each episode")
+    how.add_argument("--every-chunk", action="store_true",
+                     help="an open-loop replay of each episode: a chunk every --executed-per-chunk frames, each "
+                          "from the real observation there, stored as one rollout (kind open_loop_replay)")
     p.add_argument("--camera", type=_key_value("KEY=NAME"), action="append", metavar="KEY=NAME",
                    help="send dataset camera NAME under server key KEY (observation/KEY when KEY has no /); repeat")
     p.add_argument("--prompt", help="the prompt for every sample (default: each episode's task)")
@@ -360,7 +364,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="longest wait for the connection and for each reply [s] (default 300)")
     p.add_argument("--resume", action="store_true", help="continue the session at -o: skip the samples it holds")
     p.add_argument("--executed-per-chunk", type=_positive_int, default=9, metavar="N",
-                   help="steps of a chunk its predicted frames span (default 9)")
+                   help="steps a chunk runs before the next (--every-chunk) and that its predicted frames span "
+                        "(default 9)")
     p.add_argument("--video", type=_key_value("KEY=VIEW"), action="append", metavar="KEY=VIEW",
                    help="keep the reply's predicted frames under KEY as view VIEW (default: video=<first camera>)")
     p.add_argument("--model", help="the model's name in the session (default: the server address)")

@@ -72,7 +72,7 @@ def test_samples_reach_the_server_and_the_session_measures_them_exactly(dataset:
     # printed before the run: the camera mapping
     assert "observation/exterior_image_0_left <- front" in done.stderr
     assert "observation/wrist_image_left <- wrist" in done.stderr
-    assert f"{len(tags)} sample(s) written" in done.stdout and "p50" in done.stdout and "p95" in done.stdout
+    assert f"{len(tags)} rollout(s) written" in done.stdout and "p50" in done.stdout and "p95" in done.stdout
 
     # what the server received: one reset then one infer per sample, a fresh session id each,
     # images at the server's resolution, the state by joint, the episode's task
@@ -129,6 +129,35 @@ def test_frames_prompt_cameras_and_predicted_video(dataset: Path, tmp_path: Path
     assert rollout.prompt == "put it back" and rollout.views == ["front"] and rollout.frames_per_chunk == 9
     assert rollout.video("front").decode().shape == (9, 32, 40, 3)
     assert session.model["cameras"]["observation/overhead"] == "front"
+
+
+def test_every_chunk_replays_each_episode_open_loop(dataset: Path, tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    with policy_server(form="map") as server:
+        done = run_cli("eval", server.url, str(dataset), "-o", str(out), "--every-chunk", "--executed-per-chunk", "9")
+    assert done.returncode == 0, done.stderr
+    frames = {e: list(range(0, n, 9)) for e, n in enumerate(LENGTHS)}
+    # one reset per episode, then a chunk every 9 frames from the real state there, one session id
+    assert len(server.resets) == 2 and len(server.infers) == sum(map(len, frames.values()))
+    assert [r.session_id for r in server.infers] == [server.resets[e] for e in frames for _ in frames[e]]
+    ds = open_dataset(dataset)
+    sent = [(e, f) for e in frames for f in frames[e]]
+    for received, (e, f) in zip(server.infers, sent):
+        np.testing.assert_array_equal(received.joint_position, ds.episode(e).state[f, :5])
+    session = open_session(out)
+    assert sorted(session.rollouts) == ["ep000_replay", "ep001_replay"]
+    report = json.loads(run_cli("report", str(out), "--json", "--jobs", "1").stdout)
+    for row in report["rollouts"]:
+        e = row["episode_index"]
+        ep = ds.episode(e)
+        assert row["kind"] == "open_loop_replay" and row["n_chunks"] == len(frames[e])
+        pred = np.concatenate([(ep.state[f] + ramp(HORIZON)).astype(np.float32)[:9] for f in frames[e]])
+        inside = pred[:ep.length]  # steps past the episode's end are reported apart
+        drift = np.linalg.norm(inside - ep.action[:len(inside)], axis=1)
+        assert row["time_aligned_drift"]["mean"] == pytest.approx(drift.mean(), rel=1e-9)
+        assert row["post_episode_chunks"] == 0
+    table = run_cli("report", str(out), "--jobs", "1").stdout
+    assert "Open-loop replays" in table and "ep001_replay" in table
 
 
 def test_faults_are_one_line_each_and_lose_nothing(dataset: Path, tmp_path: Path) -> None:

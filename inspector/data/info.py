@@ -7,7 +7,7 @@ from typing import Any
 
 from ..errors import InspectorError
 from .lerobot_dataset import INFO_PATH, LeRobotDataset, is_lerobot_dataset
-from .session import is_rollout, is_session, load_rollout, open_session
+from .session import CHAINED_KINDS, is_rollout, is_session, load_rollout, open_session
 
 
 def describe(path: Path) -> dict[str, Any]:
@@ -71,7 +71,7 @@ def format_info(info: dict[str, Any]) -> str:
     lines.append(f"{'tag':<{width}} {'kind':<15} {'chunks':>6} {'horizon':>7} {'exec':>4}  {'GT joints':<9}  views")
     for r in info["rollouts"]:
         # a single chunk is judged on its whole horizon: "executed" does not apply
-        executed = r["executed_per_chunk"] if r["kind"] == "autoregressive" else "-"
+        executed = r["executed_per_chunk"] if r["kind"] in CHAINED_KINDS else "-"
         lines.append(f"{r['tag']:<{width}} {r['kind']:<15} {r['n_chunks']:>6} {r['horizon']:>7} "
                      f"{executed:>4}  {'yes' if r['has_gt_joints'] else 'no':<9}  "
                      f"{', '.join(r['views'])}")

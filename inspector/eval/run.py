@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..data.lerobot_dataset import Episode, LeRobotDataset, dataset_name, find_dataset, open_dataset
-from ..data.session import SESSION_FILE, SessionWriter, is_session, open_session
+from ..data.session import SESSION_FILE, RolloutKind, SessionWriter, is_session, open_session
 from ..errors import InspectorError, one_line
 from ..progress import progress_bar
 from .client import PolicyClient, SampleError, ServerConfig, server_url
@@ -36,16 +36,25 @@ DEFAULT_EXECUTED = 9  # actions a chunk runs before the next (what imagined fram
 DEFAULT_VIDEO_KEY = "video"
 
 
+REPLAY_KIND: RolloutKind = "open_loop_replay"
+
+
 @dataclass
 class Sample:
-    """One request to make: an episode and its start frame."""
+    """One rollout to make: an episode and the frames to request a chunk at (one for a
+    single-chunk sample; a chunk every ``executed_per_chunk`` frames for an open-loop replay)."""
 
     episode: int
-    frame: int
+    frames: list[int]
+    replay: bool = False
 
     @property
     def tag(self) -> str:
-        return f"ep{self.episode:03d}_f{self.frame:04d}"
+        return f"ep{self.episode:03d}_replay" if self.replay else f"ep{self.episode:03d}_f{self.frames[0]:04d}"
+
+    @property
+    def kind(self) -> RolloutKind:
+        return REPLAY_KIND if self.replay else "single_chunk"
 
 
 @dataclass
@@ -59,11 +68,14 @@ class EvalPlan:
         episodes: episode indexes (None: all).
         samples: start frames evenly spaced in each episode (used when ``frames`` is None).
         frames: these start frames in each episode.
+        every_chunk: instead, one open-loop replay per episode: a chunk every
+            ``executed_per_chunk`` frames, each from the real observation there.
         cameras: ``--camera`` server key -> dataset camera.
         prompt: the prompt for every sample (None: each episode's task).
         timeout_s: longest wait for a connection or a reply [s].
         resume: continue an existing session, skipping the samples it holds.
-        executed_per_chunk: steps the imagined frames of a chunk span.
+        executed_per_chunk: steps a chunk runs before the next in a replay, and that the
+            imagined frames of a chunk span.
         video_keys: reply key -> view name of predicted frames to keep (None: ``video`` as the
             first mapped camera).
         model: the ``model`` record of the session (name, checkpoint).
@@ -75,6 +87,7 @@ class EvalPlan:
     episodes: list[int] | None = None
     samples: int = DEFAULT_SAMPLES
     frames: list[int] | None = None
+    every_chunk: bool = False
     cameras: dict[str, str] = field(default_factory=dict)
     prompt: str | None = None
     timeout_s: float = 300.0
@@ -93,8 +106,8 @@ class EvalResult:
         written: tags written by this run.
         skipped: tags already in the session (``--resume``).
         failed: tag -> one line saying why.
-        latency_s: per written sample, from sending ``infer`` to its reply [s].
-        client_s: per written sample, the time spent outside the server's replies [s].
+        latency_s: per request of a written sample, from sending ``infer`` to its reply [s].
+        client_s: per written sample and request, the time spent outside the server's replies [s].
         cameras: server key -> dataset camera.
     """
 
@@ -112,12 +125,14 @@ class EvalResult:
 
 
 def plan_samples(dataset: LeRobotDataset, episodes: Sequence[int] | None, samples: int,
-                 frames: Sequence[int] | None) -> list[Sample]:
-    """Every (episode, start frame) to request, in order.
+                 frames: Sequence[int] | None, every: int | None = None) -> list[Sample]:
+    """Every rollout to make, in order.
 
-    ``frames`` as given in each episode (one past its end is still listed: it fails alone);
-    otherwise ``samples`` start frames evenly spaced from 0 to ``length - 24`` (the last start
-    leaves a horizon of GT after it), fewer where the episode is too short to space them.
+    With ``every``, one replay per episode with a chunk at frames 0, every, 2 * every, ...
+    before its end. Otherwise single chunks: at ``frames`` in each episode (one past its end is
+    still listed: it fails alone), or at ``samples`` start frames evenly spaced from 0 to
+    ``length - 24`` (the last start leaves a horizon of GT after it), fewer where the episode is
+    too short to space them.
 
     Raises:
         InspectorError: an episode the dataset lacks.
@@ -129,12 +144,15 @@ def plan_samples(dataset: LeRobotDataset, episodes: Sequence[int] | None, sample
                                            f"{', '.join(map(str, missing))} (episodes {dataset.describe_episodes()})")
     out = []
     for e in indexes:
+        if every is not None:
+            out.append(Sample(e, list(range(0, dataset.episode_info(e).length, every)), replay=True))
+            continue
         if frames is not None:
             starts = sorted(set(frames))
         else:
             last = max(0, dataset.episode_info(e).length - SPACING_HORIZON)
             starts = sorted({int(round(v)) for v in np.linspace(0, last, samples)})
-        out += [Sample(e, f) for f in starts]
+        out += [Sample(e, [f]) for f in starts]
     return out
 
 
@@ -193,7 +211,8 @@ def evaluate(plan: EvalPlan, log: Callable[[str], None] = lambda line: print(lin
     """
     url = server_url(plan.server)
     dataset = open_dataset(find_dataset(plan.dataset))
-    samples = plan_samples(dataset, plan.episodes, plan.samples, plan.frames)
+    samples = plan_samples(dataset, plan.episodes, plan.samples, plan.frames,
+                           plan.executed_per_chunk if plan.every_chunk else None)
     client: PolicyClient | None = connect(url, plan.timeout_s)
     assert client is not None
     config = client.config
@@ -216,7 +235,8 @@ def evaluate(plan: EvalPlan, log: Callable[[str], None] = lambda line: print(lin
     todo = [s for s in samples if s.tag not in done]
     size = None if config.image_resolution is None else (config.image_resolution[1], config.image_resolution[0])
     reader = FrameReader(size)
-    bar = progress_bar(len(todo), "eval", unit="sample", show=progress)
+    # the bar counts requests: a replay of a long episode makes many
+    bar = progress_bar(sum(len(s.frames) for s in todo), "eval", unit="request", show=progress)
 
     def fail(tag: str, why: str) -> None:
         result.failed[tag] = one_line(why)
@@ -235,7 +255,7 @@ def evaluate(plan: EvalPlan, log: Callable[[str], None] = lambda line: print(lin
                     if client.config != config:
                         raise SampleError(f"the server's config changed on reconnecting: {client.config.raw}")
                 waited = _one_sample(plan, dataset, sample, client, cameras, video_keys, reader, writer, result, url)
-                result.client_s.append(time.perf_counter() - started - waited)
+                result.client_s += [(time.perf_counter() - started - waited) / len(sample.frames)] * len(sample.frames)
             except ReplyError as exc:  # a bad chunk: the connection is still good
                 fail(sample.tag, str(exc))
             except SampleError as exc:
@@ -246,7 +266,7 @@ def evaluate(plan: EvalPlan, log: Callable[[str], None] = lambda line: print(lin
             except InspectorError as exc:  # this sample's data (a frame past the end, a broken video)
                 fail(sample.tag, str(exc))
             if bar is not None:
-                bar.update(1)
+                bar.update(len(sample.frames))
                 if result.failed:
                     bar.set_postfix_str(f"{len(result.failed)} failed", refresh=False)
     finally:
@@ -261,41 +281,68 @@ def evaluate(plan: EvalPlan, log: Callable[[str], None] = lambda line: print(lin
 def _one_sample(plan: EvalPlan, dataset: LeRobotDataset, sample: Sample, client: PolicyClient,
                 cameras: Mapping[str, str], video_keys: Mapping[str, str], reader: FrameReader,
                 writer: SessionWriter, result: EvalResult, url: str) -> float:
-    """Request, check and write one sample. Returns the time spent waiting on the server [s]."""
+    """Request, check and write one rollout: a reset, then a chunk at each of its frames, all
+    under one session id. Returns the time spent waiting on the server [s]."""
     episode: Episode = dataset.episode(sample.episode)
-    if not 0 <= sample.frame < episode.length:
-        raise InspectorError(str(dataset.root), f"start frame {sample.frame} lies beyond episode "
-                                                f"{sample.episode} ({episode.length} frames)")
+    for frame in sample.frames:
+        if not 0 <= frame < episode.length:
+            raise InspectorError(str(dataset.root), f"start frame {frame} lies beyond episode "
+                                                    f"{sample.episode} ({episode.length} frames)")
     session_id = str(uuid.uuid4())
     prompt = plan.prompt if plan.prompt is not None else episode.task
-    obs = build_observation(episode, sample.frame, cameras, reader, prompt, session_id)
     t0 = time.perf_counter()
     client.reset(session_id)
-    t1 = time.perf_counter()
-    reply = client.infer(obs.message)
-    t2 = time.perf_counter()
-    chunk = chunk_from_reply(reply, video_keys)
-    latency = t2 - t1
-    frames_per_chunk = max((len(v) for v in chunk.videos.values()), default=plan.executed_per_chunk)
+    waited = time.perf_counter() - t0
+    chunks, latencies, states = [], [], []
+    for frame in sample.frames:
+        obs = build_observation(episode, frame, cameras, reader, prompt, session_id)
+        t1 = time.perf_counter()
+        reply = client.infer(obs.message)
+        latencies.append(time.perf_counter() - t1)
+        waited += latencies[-1]
+        chunks.append(chunk_from_reply(reply, video_keys))
+        states.append(obs.state)
+        if chunks[-1].actions.shape != chunks[0].actions.shape:
+            raise ReplyError(f"reply: the chunk at frame {frame} has shape {chunks[-1].actions.shape}, "
+                             f"the first had {chunks[0].actions.shape}")
+    horizon = chunks[0].actions.shape[0]
+    executed = min(plan.executed_per_chunk, horizon)
+    if sample.replay and plan.executed_per_chunk > horizon:
+        raise ReplyError(f"reply: chunks of {horizon} steps cannot run {plan.executed_per_chunk} each "
+                         "(--executed-per-chunk)")
+    videos = _joined_videos([c.videos for c in chunks])
+    frames_per_chunk = max((len(v) // len(chunks) for v in videos.values()), default=executed)
+    record: dict[str, Any] = {
+        "server": url, "session_id": session_id, "reply_form": chunks[0].form, "cameras": dict(cameras),
+        "image_shapes": {k: list(v) for k, v in obs.image_shapes.items()}}
+    if sample.replay:
+        record.update(frames=list(sample.frames), latency_s=[round(v, 6) for v in latencies],
+                      states=[[float(v) for v in s] for s in states])
+    else:
+        record.update(latency_s=round(latencies[0], 6), state=[float(v) for v in states[0]])
     writer.add_rollout(
-        sample.tag, kind="single_chunk", actions=chunk.actions[None], prompt=prompt,
-        episode_index=sample.episode, start_frame=sample.frame, fps=episode.fps,
-        executed_per_chunk=min(plan.executed_per_chunk, chunk.actions.shape[0]),
-        frames_per_chunk=frames_per_chunk, videos=chunk.videos or None, gt_episode_length=episode.length,
-        extra={"eval": {"server": url, "session_id": session_id, "latency_s": round(latency, 6),
-                        "reset_s": round(t1 - t0, 6), "reply_form": chunk.form, "cameras": dict(cameras),
-                        "state": [float(v) for v in obs.state],
-                        "image_shapes": {k: list(v) for k, v in obs.image_shapes.items()}}},
+        sample.tag, kind=sample.kind, actions=np.stack([c.actions for c in chunks]), prompt=prompt,
+        episode_index=sample.episode, start_frame=sample.frames[0], fps=episode.fps,
+        executed_per_chunk=executed, frames_per_chunk=frames_per_chunk, videos=videos or None,
+        gt_episode_length=episode.length, extra={"eval": record},
     )
     result.written.append(sample.tag)
-    result.latency_s.append(latency)
-    return t2 - t0
+    result.latency_s += latencies
+    return waited
+
+
+def _joined_videos(per_chunk: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """Each view's predicted frames, chunk after chunk, where every chunk has as many of one size
+    (a view some chunk lacks, or with frames of another size, is dropped rather than misaligned)."""
+    first = per_chunk[0]
+    return {view: np.concatenate([v[view] for v in per_chunk]) for view in first
+            if all(view in v and v[view].shape == first[view].shape for v in per_chunk)}
 
 
 def format_result(result: EvalResult) -> str:
     """The run's summary: counts, latency p50 / p95, the client's own time per sample."""
     done = len(result.written)
-    parts = [f"{done} sample(s) written"]
+    parts = [f"{done} rollout(s) written"]
     if result.skipped:
         parts.append(f"{len(result.skipped)} already there (--resume)")
     if result.failed:

@@ -28,6 +28,8 @@ from .svg import legend_html
 
 Row = dict[str, Any]
 ASSETS = "assets"
+# A rollout kind in a table's few characters.
+KIND_LABELS = {"single_chunk": "single", "autoregressive": "AR", "open_loop_replay": "replay"}
 
 
 def _asset(name: str) -> str:
@@ -76,8 +78,8 @@ def _columns(rows: Sequence[Row], views: list[str]) -> list[tuple[str, str, bool
     if len({r.get("session") for r in rows}) > 1:
         cols.append(("session", "session name", False, lambda r: r.get("session") or "-"))
     cols += [
-        ("kind", "single-chunk or autoregressive", False,
-         lambda r: "single" if r["kind"] == "single_chunk" else "AR"),
+        ("kind", "single-chunk, autoregressive or open-loop replay", False,
+         lambda r: KIND_LABELS.get(r["kind"]) or str(r["kind"])),
         ("ep", "GT episode index", True, lambda r: _f(r["episode_index"], "d")),
         ("start", "start frame in the episode", True, lambda r: _f(r["start_frame"], "d")),
         ("chunks", "predicted chunks", True, lambda r: _f(r["n_chunks"], "d")),
@@ -131,7 +133,10 @@ def _summary(report: dict[str, Any]) -> str:
     rows, agg = report["rollouts"], report["aggregate"]
     n_single = sum(r["kind"] == "single_chunk" for r in rows)
     with_limits = sum(r["limit_violations"]["steps"] > 0 for r in rows)
-    cards = [(str(agg["n"]), f"rollouts ({n_single} single-chunk, {len(rows) - n_single} autoregressive)"),
+    n_replay = sum(r["kind"] == "open_loop_replay" for r in rows)
+    kinds = f"{n_single} single-chunk, {len(rows) - n_single - n_replay} autoregressive" + (
+        f", {n_replay} open-loop replay" if n_replay else "")
+    cards = [(str(agg["n"]), f"rollouts ({kinds})"),
              (_f(agg["mean_rmse_deg"], ".3f"), "mean RMSE [deg]"),
              (_f(agg["median_rmse_deg"], ".3f"), "median RMSE [deg]"),
              (f'{_f(agg["best_rmse_deg"], ".3f")} / {_f(agg["worst_rmse_deg"], ".3f")}', "best / worst RMSE [deg]")]
