@@ -12,7 +12,8 @@ the server reads, such as ``observation/overhead``).
 from __future__ import annotations
 
 import threading
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -191,35 +192,74 @@ class _OpenVideo:
 
 @dataclass
 class Observation:
-    """One request's content and what it was built from.
+    """What is sent for one frame, before the prompt and session id are added.
 
     Attributes:
-        message: the request (without ``endpoint``).
-        state: (6,) the joint state sent, :data:`JOINT_NAMES` order, dataset units.
-        image_shapes: server key -> (H, W, 3) of the image sent.
+        images: server key -> (H, W, 3) uint8 image.
+        state: (6,) the joint state, :data:`JOINT_NAMES` order, dataset units.
     """
 
-    message: dict[str, Any]
+    images: dict[str, npt.NDArray[np.uint8]]
     state: npt.NDArray[np.float64]
-    image_shapes: dict[str, tuple[int, ...]]
+
+    @property
+    def image_shapes(self) -> dict[str, tuple[int, ...]]:
+        return {k: tuple(v.shape) for k, v in self.images.items()}
+
+    def message(self, prompt: str, session_id: str) -> dict[str, Any]:
+        """The ``infer`` request (without ``endpoint``). Joints go by name: ``joint_position``
+        holds the five arm joints (``shoulder_pan`` .. ``wrist_roll``), ``gripper_position`` the
+        gripper, both in the dataset's units, float64."""
+        gripper = JOINT_NAMES.index("gripper")
+        arm = [i for i in range(len(JOINT_NAMES)) if i != gripper]
+        return {**self.images, JOINT_POSITION_KEY: self.state[arm].copy(),
+                GRIPPER_POSITION_KEY: self.state[[gripper]].copy(), "prompt": prompt, "session_id": session_id}
 
 
-def build_observation(episode: Episode, frame: int, cameras: Mapping[str, str], reader: FrameReader,
-                      prompt: str, session_id: str) -> Observation:
-    """The request for ``episode`` at ``frame``: images (scaled by ``reader``), state, prompt.
+def read_observation(episode: Episode, frame: int, cameras: Mapping[str, str], reader: FrameReader) -> Observation:
+    """The images (scaled by ``reader``) and the state of ``episode`` at ``frame``.
 
-    Joints go by name: ``joint_position`` holds the five arm joints (``shoulder_pan`` ..
-    ``wrist_roll``), ``gripper_position`` the gripper, both in the dataset's units, float64.
+    Raises:
+        InspectorError: the frame lies outside the episode, or a camera's video cannot be read.
     """
-    state = np.asarray(episode.state[frame], np.float64)
+    if not 0 <= frame < episode.length:
+        raise InspectorError(episode.source, f"start frame {frame} lies beyond episode {episode.index} "
+                                             f"({episode.length} frames)")
     images = {key: reader.frame(episode, camera, frame) for key, camera in cameras.items()}
-    gripper = JOINT_NAMES.index("gripper")
-    arm = [i for i in range(len(JOINT_NAMES)) if i != gripper]
-    message: dict[str, Any] = {
-        **images,
-        JOINT_POSITION_KEY: state[arm].copy(),
-        GRIPPER_POSITION_KEY: state[[gripper]].copy(),
-        "prompt": prompt,
-        "session_id": session_id,
-    }
-    return Observation(message, state, {k: tuple(v.shape) for k, v in images.items()})
+    return Observation(images, np.asarray(episode.state[frame], np.float64))
+
+
+class Prefetcher:
+    """Observations read one request ahead, in a thread, so the next one's frames decode while
+    the server answers this one (PyAV decodes outside the GIL).
+
+    Args:
+        dataset: what ``dataset.episode(index)`` is asked of.
+        requests: (episode, frame) of every request, in the order they will be asked for.
+        cameras: server key -> dataset camera.
+        reader: the frame reader (used by the one worker thread only).
+    """
+
+    def __init__(self, dataset: Any, requests: Sequence[tuple[int, int]], cameras: Mapping[str, str],
+                 reader: FrameReader) -> None:
+        self._dataset, self._requests, self._cameras, self._reader = dataset, list(requests), cameras, reader
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="eval-prefetch")
+        self._ahead: dict[int, Future[Observation]] = {}
+
+    def _read(self, i: int) -> Observation:
+        episode, frame = self._requests[i]
+        return read_observation(self._dataset.episode(episode), frame, self._cameras, self._reader)
+
+    def get(self, i: int) -> Observation:
+        """Request ``i``'s observation (raising what reading it raised); starts reading ``i + 1``."""
+        future = self._ahead.pop(i, None) or self._pool.submit(self._read, i)
+        for stale in [k for k in self._ahead if k < i]:  # skipped: a sample failed part way
+            self._ahead.pop(stale).cancel()
+        if i + 1 < len(self._requests) and i + 1 not in self._ahead:
+            self._ahead[i + 1] = self._pool.submit(self._read, i + 1)
+        return future.result()
+
+    def close(self) -> None:
+        for future in self._ahead.values():
+            future.cancel()
+        self._pool.shutdown(wait=True)

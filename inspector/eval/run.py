@@ -26,7 +26,7 @@ from ..data.session import SESSION_FILE, RolloutKind, SessionWriter, is_session,
 from ..errors import InspectorError, one_line
 from ..progress import progress_bar
 from .client import PolicyClient, SampleError, ServerConfig, server_url
-from .observation import FrameReader, build_observation, map_cameras
+from .observation import FrameReader, Observation, Prefetcher, map_cameras
 from .replies import ReplyError, chunk_from_reply
 
 DEFAULT_SAMPLES = 8  # start frames per episode: the seed's zero-shot protocol
@@ -235,6 +235,9 @@ def evaluate(plan: EvalPlan, log: Callable[[str], None] = lambda line: print(lin
     todo = [s for s in samples if s.tag not in done]
     size = None if config.image_resolution is None else (config.image_resolution[1], config.image_resolution[0])
     reader = FrameReader(size)
+    requests = [(s.episode, f) for s in todo for f in s.frames]
+    prefetch = Prefetcher(dataset, requests, cameras, reader)
+    first_request = np.cumsum([0] + [len(s.frames) for s in todo])
     # the bar counts requests: a replay of a long episode makes many
     bar = progress_bar(sum(len(s.frames) for s in todo), "eval", unit="request", show=progress)
 
@@ -247,14 +250,15 @@ def evaluate(plan: EvalPlan, log: Callable[[str], None] = lambda line: print(lin
             log(line)
 
     try:
-        for sample in todo:
+        for i, sample in enumerate(todo):
             started = time.perf_counter()
             try:
                 if client is None:
                     client = PolicyClient(url, plan.timeout_s)
                     if client.config != config:
                         raise SampleError(f"the server's config changed on reconnecting: {client.config.raw}")
-                waited = _one_sample(plan, dataset, sample, client, cameras, video_keys, reader, writer, result, url)
+                waited = _one_sample(plan, dataset, sample, client, cameras, video_keys,
+                                     lambda k: prefetch.get(int(first_request[i]) + k), writer, result, url)
                 result.client_s += [(time.perf_counter() - started - waited) / len(sample.frames)] * len(sample.frames)
             except ReplyError as exc:  # a bad chunk: the connection is still good
                 fail(sample.tag, str(exc))
@@ -274,30 +278,29 @@ def evaluate(plan: EvalPlan, log: Callable[[str], None] = lambda line: print(lin
             bar.close()
         if client is not None:
             client.close()
+        prefetch.close()
         reader.close()
     return result
 
 
 def _one_sample(plan: EvalPlan, dataset: LeRobotDataset, sample: Sample, client: PolicyClient,
-                cameras: Mapping[str, str], video_keys: Mapping[str, str], reader: FrameReader,
+                cameras: Mapping[str, str], video_keys: Mapping[str, str], observation: Callable[[int], Observation],
                 writer: SessionWriter, result: EvalResult, url: str) -> float:
     """Request, check and write one rollout: a reset, then a chunk at each of its frames, all
-    under one session id. Returns the time spent waiting on the server [s]."""
+    under one session id. ``observation(k)`` reads the k-th frame's. Returns the time spent
+    waiting on the server [s]."""
     episode: Episode = dataset.episode(sample.episode)
-    for frame in sample.frames:
-        if not 0 <= frame < episode.length:
-            raise InspectorError(str(dataset.root), f"start frame {frame} lies beyond episode "
-                                                    f"{sample.episode} ({episode.length} frames)")
+    obs = observation(0)  # a frame past the episode's end fails here, before the server is asked
     session_id = str(uuid.uuid4())
     prompt = plan.prompt if plan.prompt is not None else episode.task
     t0 = time.perf_counter()
     client.reset(session_id)
     waited = time.perf_counter() - t0
     chunks, latencies, states = [], [], []
-    for frame in sample.frames:
-        obs = build_observation(episode, frame, cameras, reader, prompt, session_id)
+    for k, frame in enumerate(sample.frames):
+        obs = obs if k == 0 else observation(k)
         t1 = time.perf_counter()
-        reply = client.infer(obs.message)
+        reply = client.infer(obs.message(prompt, session_id))
         latencies.append(time.perf_counter() - t1)
         waited += latencies[-1]
         chunks.append(chunk_from_reply(reply, video_keys))
