@@ -362,7 +362,7 @@ def bench_eval(tmp: Path, quick: bool) -> list[Figure]:
         ours = run_process(inspector_cmd("eval", server.url, dataset, "-o", tmp / "eval_ours", "--samples", per_episode))
         naive = run_process([sys.executable, NAIVE, "eval", server.url, dataset, tmp / "eval_naive", "-n", str(per_episode)])
     n = 2 * per_episode
-    match = re.search(r"client time per sample: p50 ([0-9.]+) ms", ours.stdout)
+    match = re.search(r"client time per request: p50 ([0-9.]+) ms", ours.stdout)
     if match is None:
         raise RuntimeError(f"inspector eval printed no client time: {ours.stdout}")
     client_ms, naive_ms = float(match[1]), json.loads(naive.stdout)["client_ms_p50"]

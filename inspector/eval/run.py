@@ -343,7 +343,7 @@ def _joined_videos(per_chunk: list[dict[str, np.ndarray]]) -> dict[str, np.ndarr
 
 
 def format_result(result: EvalResult) -> str:
-    """The run's summary: counts, latency p50 / p95, the client's own time per sample."""
+    """The run's summary: counts, latency p50 / p95, the client's own time per request."""
     done = len(result.written)
     parts = [f"{done} rollout(s) written"]
     if result.skipped:
@@ -355,5 +355,5 @@ def format_result(result: EvalResult) -> str:
         p50, p95 = np.percentile(result.latency_s, [50, 95])
         c50 = float(np.percentile(result.client_s, 50)) if result.client_s else float("nan")
         lines.append(f"latency (infer to reply): p50 {p50:.3f} s, p95 {p95:.3f} s; "
-                     f"client time per sample: p50 {c50 * 1000:.1f} ms")
+                     f"client time per request: p50 {c50 * 1000:.1f} ms")
     return "\n".join(lines)
