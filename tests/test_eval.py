@@ -268,3 +268,15 @@ def test_bad_input_is_one_line_and_exit_2(dataset: Path, tmp_path: Path) -> None
         assert bad.returncode == 2 and bad.stderr.startswith(f"error: {flag}: "), bad.stderr
     assert not (tmp_path / "x").exists()
     assert os.listdir(tmp_path) == []
+
+
+def test_progress_bar_counts_requests_with_rate(dataset: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from inspector.eval import EvalPlan, evaluate
+
+    with policy_server(delay_s=0.3) as server:
+        result = evaluate(EvalPlan(server.url, str(dataset), str(tmp_path / "run"), episodes=[1], samples=3),
+                          log=lambda line: None, progress=True)
+    assert result.ok and len(result.written) == 3 and len(result.latency_s) == 3
+    assert min(result.latency_s) >= 0.3  # each reply waited for the server's delay
+    bar = capsys.readouterr().err
+    assert "eval" in bar and "3/3" in bar and "request/s" in bar
