@@ -15,7 +15,6 @@ the connection it happened on is closed (a late reply must never be read as the 
 
 from __future__ import annotations
 
-import socket
 from dataclasses import dataclass
 from typing import Any
 from urllib.parse import urlsplit
@@ -134,7 +133,7 @@ class PolicyClient:
                                max_size=None, ping_interval=None, ping_timeout=None)
         except TimeoutError:
             raise SampleError(f"cannot connect to {url}: no answer within {timeout_s:g} s") from None
-        except (OSError, socket.gaierror) as exc:
+        except OSError as exc:  # refused, unreachable, a name that does not resolve
             raise SampleError(f"cannot connect to {url} ({exc.strerror or exc})") from None
         except Exception as exc:  # websockets' handshake errors (not a websocket server, ...)
             raise SampleError(f"cannot connect to {url} ({type(exc).__name__}: {exc})") from None

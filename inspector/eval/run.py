@@ -210,6 +210,8 @@ def evaluate(plan: EvalPlan, log: Callable[[str], None] = lambda line: print(lin
             mapping, the output); a failed sample is never raised, it is in ``failed``.
     """
     url = server_url(plan.server)
+    if is_session(plan.output) and not plan.resume:  # before the server is bothered
+        raise InspectorError(plan.output, "already exists (pass --resume to continue it)")
     dataset = open_dataset(find_dataset(plan.dataset))
     samples = plan_samples(dataset, plan.episodes, plan.samples, plan.frames,
                            plan.executed_per_chunk if plan.every_chunk else None)
