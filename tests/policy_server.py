@@ -40,6 +40,7 @@ class Received:
     joint_position: np.ndarray
     gripper_position: np.ndarray
     keys: list[str]
+    images: dict[str, np.ndarray]
 
 
 @dataclass
@@ -110,7 +111,8 @@ class PolicyServer:
                         image_shapes={k: tuple(v.shape) for k, v in obs.items() if isinstance(v, np.ndarray)
                                       and v.dtype == np.uint8},
                         joint_position=np.array(obs["observation/joint_position"]),
-                        gripper_position=np.array(obs["observation/gripper_position"]), keys=sorted(obs)))
+                        gripper_position=np.array(obs["observation/gripper_position"]), keys=sorted(obs),
+                        images={k: np.array(v) for k, v in obs.items() if isinstance(v, np.ndarray) and v.ndim == 3}))
                 fault = self.faults.get(index)
                 if fault == "traceback":
                     raise ValueError("Expected 5 joint values, got shape (7,)")

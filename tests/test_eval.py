@@ -280,3 +280,24 @@ def test_progress_bar_counts_requests_with_rate(dataset: Path, tmp_path: Path, c
     assert min(result.latency_s) >= 0.3  # each reply waited for the server's delay
     bar = capsys.readouterr().err
     assert "eval" in bar and "3/3" in bar and "request/s" in bar
+
+
+@pytest.mark.parametrize("version, cameras", [("so101_v30", ["front", "wrist"]), ("so101_v21", ["front"])])
+def test_lerobot_written_datasets_send_their_own_frames(fixtures_dir: Path, tmp_path: Path, version: str,
+                                                        cameras: list[str]) -> None:
+    """Datasets LeRobot itself wrote (AV1): each image sent is the dataset's frame, decoded alone."""
+    dataset = fixtures_dir / "lerobot" / version
+    config = {**DEFAULT_CONFIG, "image_resolution": None, "n_external_cameras": 1,
+              "needs_wrist_camera": "wrist" in cameras}
+    with policy_server(config=config) as server:
+        done = run_cli("eval", server.url, str(dataset), "-o", str(tmp_path / "run"), "--samples", "2")
+    assert done.returncode == 0, done.stderr
+    ds = open_dataset(dataset)
+    sent = [(e.index, f) for e in ds.episodes for f in evenly_spaced(2, e.length)]
+    assert len(server.infers) == len(sent)
+    keys = ["observation/exterior_image_0_left", "observation/wrist_image_left"][:len(cameras)]
+    for received, (e, f) in zip(server.infers, sent):
+        episode = ds.episode(e)
+        for key, camera in zip(keys, cameras):
+            np.testing.assert_array_equal(received.images[key], episode.frame(camera, f))
+        np.testing.assert_array_equal(received.joint_position, episode.state[f, :5])

@@ -12,6 +12,7 @@ the server reads, such as ``observation/overhead``).
 from __future__ import annotations
 
 import threading
+from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
@@ -112,10 +113,12 @@ class FrameReader:
 
     # Decode on rather than seek when the frame wanted lies at most this far ahead [s].
     DECODE_AHEAD_S = 0.5
+    # Video files kept open, most recently used (a v2.1 dataset has one per episode and camera).
+    MAX_OPEN = 16
 
     def __init__(self, size: tuple[int, int] | None) -> None:
         self.size = size
-        self._open: dict[Path, _OpenVideo] = {}
+        self._open: OrderedDict[Path, _OpenVideo] = OrderedDict()
         self._to_rgb = RgbConverter()
         self._lock = threading.Lock()
 
@@ -134,6 +137,9 @@ class FrameReader:
             video = self._open.get(seg.path)
             if video is None:
                 video = self._open[seg.path] = _OpenVideo(seg.path)
+                while len(self._open) > self.MAX_OPEN:
+                    self._open.popitem(last=False)[1].close()
+            self._open.move_to_end(seg.path)
             frame = video.frame_at(t, 0.5 / episode.fps, self.DECODE_AHEAD_S)
             if frame is None:
                 raise InspectorError(seg.path, f"{camera}: no frame {index} in episode {episode.index}")
