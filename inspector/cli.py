@@ -102,11 +102,11 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     missing = [m for m in ("msgpack", "websockets") if importlib.util.find_spec(m) is None]
     if missing:
         raise InspectorError("inspector eval", f"needs {' and '.join(missing)}: pip install 'inspector[eval]'")
-    from .eval.run import EvalPlan, evaluate, format_result
+    from .eval.run import DEFAULT_SAMPLES, EvalPlan, evaluate, format_result
 
     model = {k: v for k, v in (("name", args.model), ("checkpoint", args.checkpoint)) if v is not None}
     plan = EvalPlan(server=args.server, dataset=args.dataset, output=args.output, episodes=args.episodes,
-                    samples=args.samples or 8, frames=args.frames, every_chunk=args.every_chunk,
+                    samples=args.samples or DEFAULT_SAMPLES, frames=args.frames, every_chunk=args.every_chunk,
                     cameras=dict(args.camera or []),
                     prompt=args.prompt, timeout_s=args.timeout, resume=args.resume,
                     executed_per_chunk=args.executed_per_chunk,
