@@ -4,12 +4,16 @@ script (and this project before its scale work) does.
     python benchmarks/naive.py report SESSION [-n N]
     python benchmarks/naive.py export SESSION TAG OUT.rrd
     python benchmarks/naive.py export-all SESSION OUT_DIR
+    python benchmarks/naive.py eval SERVER DATASET OUT_SESSION -n N
 
 ``report``: every rollout opened up front, one timeline each, every clip decoded whole into
 memory and kept with its rollout, PSNR on the arrays, all of it held until the end.
 ``export``: the clips decoded whole, then one ``rr.log`` of an ``rr.Image`` per frame and view.
 ``export-all``: every rollout of a session written by today's exporter, one after another in
 this one process (what ``inspector export SESSION -o DIR`` did before it used worker processes).
+``eval``: a first evaluation loop against a policy server: each sample's frames read alone
+(``Episode.frame``: a fresh container and a seek), resized with PIL, sent, written, one after
+another; prints the client's time per sample (outside the server's replies) as JSON.
 """
 
 from __future__ import annotations
@@ -77,6 +81,47 @@ def one_process_export_all(session_dir: str, out_dir: str) -> None:
         export_rollout(session.rollouts[tag], Path(out_dir) / f"{tag}.rrd", None, 2.0, MetricsCache())
 
 
+def naive_eval(server: str, dataset: str, out: str, n: int) -> dict:
+    import time
+    import uuid
+
+    from PIL import Image
+    from websockets.sync.client import connect
+
+    from inspector.data import SessionWriter, open_dataset
+    from inspector.eval.wire import packb, unpackb
+
+    ds = open_dataset(dataset)
+    ws = connect(server, compression=None, max_size=None, ping_interval=None)
+    config = unpackb(ws.recv())
+    height, width = config["image_resolution"]
+    keys = [f"observation/exterior_image_{i}_left" for i in range(config["n_external_cameras"])]
+    keys += ["observation/wrist_image_left"] if config["needs_wrist_camera"] else []
+    client = []
+    with SessionWriter.create(out, units=ds.units, dataset=str(ds.root)) as writer:
+        for ref in ds.episodes:
+            episode = ds.episode(ref.index)
+            for start in np.linspace(0, episode.length - 24, n).astype(int):
+                t0 = time.perf_counter()
+                obs = {key: np.asarray(Image.fromarray(episode.frame(cam, int(start))).resize((width, height)))
+                       for key, cam in zip(keys, ds.cameras)}
+                state = episode.state[start]
+                obs.update({"observation/joint_position": state[:5], "observation/gripper_position": state[5:],
+                            "prompt": episode.task, "session_id": str(uuid.uuid4()), "endpoint": "infer"})
+                t1 = time.perf_counter()
+                ws.send(packb({"session_id": obs["session_id"], "endpoint": "reset"}))
+                ws.recv()
+                ws.send(packb(obs))
+                chunk = np.asarray(unpackb(ws.recv()), np.float64)
+                t2 = time.perf_counter()
+                writer.add_rollout(f"ep{ref.index:03d}_f{start:04d}", kind="single_chunk", actions=chunk[None],
+                                   episode_index=ref.index, start_frame=int(start), prompt=episode.task,
+                                   fps=episode.fps)
+                client.append(time.perf_counter() - t0 - (t2 - t1))
+    ws.close()
+    return {"samples": len(client), "client_ms_p50": float(np.percentile(client, 50) * 1000)}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="what", required=True)
@@ -90,8 +135,15 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("export-all")
     p.add_argument("session")
     p.add_argument("out_dir")
+    p = sub.add_parser("eval")
+    p.add_argument("server")
+    p.add_argument("dataset")
+    p.add_argument("out")
+    p.add_argument("-n", type=int, default=8)
     args = parser.parse_args(argv)
-    if args.what == "report":
+    if args.what == "eval":
+        print(json.dumps(naive_eval(args.server, args.dataset, args.out, args.n)))
+    elif args.what == "report":
         print(json.dumps(naive_report(args.session, args.n)))
     elif args.what == "export-all":
         one_process_export_all(args.session, args.out_dir)

@@ -374,6 +374,60 @@ def bench_export(tmp: Path, quick: bool) -> list[Figure]:
 
 
 # ----------------------------------------------------------------------------------------------
+# inspector eval against a local policy server
+
+
+def _camera_frames(n: int, seed: int) -> np.ndarray:
+    """(n, 480, 640, 3) frames that encode like a camera's: a gradient, a moving block, sensor noise."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:480, 0:640]
+    base = np.stack([x * 255 // 640, y * 255 // 480, (x + y) * 255 // 1120], -1).astype(np.int16)
+    out = np.empty((n, 480, 640, 3), np.uint8)
+    for i in range(n):
+        frame = base.copy()
+        cx, cy = 100 + (3 * i) % 400, 120 + (2 * i) % 200
+        frame[cy:cy + 80, cx:cx + 120] = (200, 60 + 40 * seed, 40)
+        out[i] = np.clip(frame + rng.integers(-3, 4, frame.shape, dtype=np.int16), 0, 255)
+    return out
+
+
+def bench_eval(tmp: Path, quick: bool) -> list[Figure]:
+    """``inspector eval`` of a 3-camera 640x480 dataset (keyframes every 2 frames, as LeRobot
+    writes) against a local echo server (a fixed chunk at once, so the figures are the client's):
+    samples per second, and the client's own time per sample (everything outside the server's
+    replies: frames, request, checks, write), beside a first loop (``naive.py eval``)."""
+    from inspector.data.lerobot_writer import EpisodeData, write_lerobot_dataset
+
+    sys.path.insert(0, str(REPO / "tests"))
+    from policy_server import policy_server
+
+    dataset = tmp / "eval_dataset"
+    n_frames, per_episode = (90, 10) if quick else (150, 40)
+    if not dataset.exists():
+        t = np.arange(n_frames)[:, None]
+        episodes = []
+        for e in range(2):
+            state = 20 * np.sin(t / 10 + np.arange(6) + e) + 30
+            episodes.append(EpisodeData(f"task {e}", state, state + 1,
+                                        {cam: _camera_frames(n_frames, i + e) for i, cam in enumerate(("front", "top", "wrist"))}))
+        write_lerobot_dataset(dataset, episodes, keyframe_every=2)
+    config = {"image_resolution": (480, 640), "n_external_cameras": 2, "needs_wrist_camera": True,
+              "needs_stereo_camera": False, "needs_session_id": True, "action_space": "joint_position"}
+    with policy_server(echo=True, config=config) as server:
+        ours = run_process(inspector_cmd("eval", server.url, dataset, "-o", tmp / "eval_ours", "--samples", per_episode))
+        naive = run_process([sys.executable, NAIVE, "eval", server.url, dataset, tmp / "eval_naive", "-n", str(per_episode)])
+    n = 2 * per_episode
+    match = re.search(r"client time per request: p50 ([0-9.]+) ms", ours.stdout)
+    if match is None:
+        raise RuntimeError(f"inspector eval printed no client time: {ours.stdout}")
+    client_ms, naive_ms = float(match[1]), json.loads(naive.stdout)["client_ms_p50"]
+    return [Figure("eval_client", client_ms, "ms", "< 20 ms per sample", client_ms < 20, baseline=naive_ms,
+                   note="3 cameras of 640x480 sent at that size, echo server; median time per sample outside the server's replies"),
+            Figure("eval_rate", n / ours.wall_s, "samples/s", "report only", True, ours.peak_mib, n / naive.wall_s,
+                   naive.peak_mib, f"{n} samples, whole process (start-up included)")]
+
+
+# ----------------------------------------------------------------------------------------------
 # The app
 
 
@@ -716,7 +770,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="smaller counts, fewer repetitions")
     parser.add_argument("--json", type=Path, help="also write the figures as JSON")
-    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback keys groot")
+    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback keys groot eval")
     args = parser.parse_args(argv)
 
     figures: list[Figure] = []
@@ -734,6 +788,7 @@ def main(argv: list[str] | None = None) -> int:
             ("playback", lambda: bench_playback(tmp, args.quick)),
             ("keys", lambda: bench_keys(tmp, args.quick)),
             ("groot", lambda: bench_groot(tmp, args.quick)),
+            ("eval", lambda: bench_eval(tmp, args.quick)),
         ]
         for name, run in runs:
             if args.only and name not in args.only:

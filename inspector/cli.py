@@ -1,4 +1,4 @@
-"""``inspector`` command line: import, info, report, compare, serve, export, demo.
+"""``inspector`` command line: import, info, report, compare, serve, export, eval, demo.
 
 Bad input ends with exit code 2 and one line ``error: <file>: <what is wrong>``, never a traceback.
 What counts as bad input, per command:
@@ -15,6 +15,9 @@ What counts as bad input, per command:
   file, and makes the exit code 2.
 - ``serve``: exit 2 when no path can be served; a path that cannot be opened among others is its
   ``error:`` line on stderr and an error card in the app, and the others are served.
+- ``eval``: exit 2 at once when the run cannot start (dataset, server, handshake, cameras, output);
+  otherwise every sample that fails prints its own ``error:`` line, the others are written, and
+  the exit code is 2 if any failed.
 """
 
 from __future__ import annotations
@@ -119,6 +122,26 @@ def _cmd_export(args: argparse.Namespace) -> int:
                       episodes=args.episode, ray=args.ray, jobs=args.jobs, calibration=args.calibration)
 
 
+def _cmd_eval(args: argparse.Namespace) -> int:
+    import importlib.util
+
+    missing = [m for m in ("msgpack", "websockets") if importlib.util.find_spec(m) is None]
+    if missing:
+        raise InspectorError("inspector eval", f"needs {' and '.join(missing)}: pip install 'inspector[eval]'")
+    from .eval.run import DEFAULT_SAMPLES, EvalPlan, evaluate, format_result
+
+    model = {k: v for k, v in (("name", args.model), ("checkpoint", args.checkpoint)) if v is not None}
+    plan = EvalPlan(server=args.server, dataset=args.dataset, output=args.output, episodes=args.episodes,
+                    samples=args.samples or DEFAULT_SAMPLES, frames=args.frames, every_chunk=args.every_chunk,
+                    cameras=dict(args.camera or []),
+                    prompt=args.prompt, timeout_s=args.timeout, resume=args.resume,
+                    executed_per_chunk=args.executed_per_chunk,
+                    video_keys=dict(args.video) if args.video else None, model=model)
+    result = evaluate(plan)
+    print(format_result(result))
+    return 0 if result.ok else EXIT_BAD_INPUT
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     from .demo import rebuild_demo
 
@@ -185,6 +208,31 @@ def _port(text: str) -> int:
     if not 0 <= value <= 65535:
         raise argparse.ArgumentTypeError(f"must be a TCP port from 0 to 65535 (got {value}; 0 picks a free one)")
     return value
+
+
+def _index_list(text: str) -> list[int]:
+    """``0,3,10-20`` -> [0, 3, 10, 11, ..., 20] (an argparse type)."""
+    out: list[int] = []
+    for part in text.split(","):
+        match = re.fullmatch(r"\s*(\d+)\s*(?:-\s*(\d+)\s*)?", part)
+        if not match or (match[2] is not None and int(match[2]) < int(match[1])):
+            raise argparse.ArgumentTypeError(f"expected indexes like 0,3,10-20 (got {text!r})")
+        first = int(match[1])
+        last = first if match[2] is None else int(match[2])
+        if last - first > 1_000_000:
+            raise argparse.ArgumentTypeError(f"a range of more than a million indexes (got {part!r})")
+        out += range(first, last + 1)
+    return sorted(set(out))
+
+
+def _key_value(what: str) -> Callable[[str], tuple[str, str]]:
+    """An argparse type: ``KEY=VALUE``, both non-empty."""
+    def parse(text: str) -> tuple[str, str]:
+        key, sep, value = text.partition("=")
+        if not sep or not key.strip() or not value.strip():
+            raise argparse.ArgumentTypeError(f"expected {what} (got {text!r})")
+        return key.strip(), value.strip()
+    return parse
 
 
 def _margin(text: str) -> float:
@@ -362,6 +410,34 @@ def build_parser() -> argparse.ArgumentParser:
     _limit_margin_argument(p)
     _calibration_argument(p)
     p.set_defaults(func=_cmd_export)
+
+    p = sub.add_parser("eval", help="evaluate a served checkpoint against a LeRobot dataset, open loop "
+                                    "(DreamZero / RoboArena websocket protocol)")
+    p.add_argument("server", help="the policy server: ws://HOST:PORT or HOST:PORT")
+    p.add_argument("dataset", help="LeRobot dataset (a directory or org/name in the local cache)")
+    p.add_argument("-o", "--output", required=True, help="session directory to write")
+    p.add_argument("--episodes", type=_index_list, metavar="LIST", help="episodes, e.g. 0,3,10-20 (default: all)")
+    how = p.add_mutually_exclusive_group()
+    how.add_argument("--samples", type=_positive_int, metavar="N",
+                     help="N start frames evenly spaced in each episode (default 8)")
+    how.add_argument("--frames", type=_index_list, metavar="LIST", help="these start frames in each episode")
+    how.add_argument("--every-chunk", action="store_true",
+                     help="an open-loop replay of each episode: a chunk every --executed-per-chunk frames, each "
+                          "from the real observation there, stored as one rollout (kind open_loop_replay)")
+    p.add_argument("--camera", type=_key_value("KEY=NAME"), action="append", metavar="KEY=NAME",
+                   help="send dataset camera NAME under server key KEY (observation/KEY when KEY has no /); repeat")
+    p.add_argument("--prompt", help="the prompt for every sample (default: each episode's task)")
+    p.add_argument("--timeout", type=_positive_float, default=300.0, metavar="S",
+                   help="longest wait for the connection and for each reply [s] (default 300)")
+    p.add_argument("--resume", action="store_true", help="continue the session at -o: skip the samples it holds")
+    p.add_argument("--executed-per-chunk", type=_positive_int, default=9, metavar="N",
+                   help="steps a chunk runs before the next (--every-chunk) and that its predicted frames span "
+                        "(default 9)")
+    p.add_argument("--video", type=_key_value("KEY=VIEW"), action="append", metavar="KEY=VIEW",
+                   help="keep the reply's predicted frames under KEY as view VIEW (default: video=<first camera>)")
+    p.add_argument("--model", help="the model's name in the session (default: the server address)")
+    p.add_argument("--checkpoint", help="the checkpoint's name in the session")
+    p.set_defaults(func=_cmd_eval)
 
     p = sub.add_parser("demo", help="rebuild the bundled demo session")
     p.add_argument("--rebuild", action="store_true")

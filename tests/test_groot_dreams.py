@@ -395,4 +395,7 @@ def test_report_html_of_a_dump_alone_is_written(dump, tmp_path):
     """A report of datasets alone has no rollout rows: the page is still written (it raised before)."""
     out = _cli("report", str(dump), "--html", str(tmp_path / "r.html"))
     assert out.returncode == 0, out.stderr
-    assert (tmp_path / "r.html").read_text().startswith("<!DOCTYPE html>")
+    page = (tmp_path / "r.html").read_text()
+    assert page.startswith("<!DOCTYPE html>")
+    table = page.split('<table id="trajectories">')[1].split("</table>")[0]
+    assert table.count("<tr>") == 1 + len(EPISODES) and "&lt;DREAM&gt;" in table  # the heading and each episode

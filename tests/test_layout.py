@@ -25,6 +25,7 @@ LAYERS = [
     {"errors", "units", "cache", "progress", "_lazy"},
     {"robot"},
     {"data"},
+    {"eval"},
     {"analysis"},
     {"jobs"},
     {"report"},

@@ -16,6 +16,7 @@ import numpy.typing as npt
 
 from ..analysis import metrics
 from ..analysis.timeline import ROLLOUT_LABELS, RolloutTimeline
+from ..data.session import CHAINED_KINDS
 from ..errors import InspectorError, one_line
 from ..units import JOINT_NAMES
 from ._frames import LOADING, READY, FramePair
@@ -156,7 +157,7 @@ def rollout_card(tl: RolloutTimeline, metrics: Sequence[tuple[str, str]], gt_not
     model = session.model if session is not None else {}
     model_text = " · ".join(str(model[k]) for k in ("name", "checkpoint") if model.get(k)) or "—"
     kind = f"{r.kind} · {r.n_chunks} chunk{'s' if r.n_chunks != 1 else ''} × {r.horizon} steps"
-    if r.kind == "autoregressive":
+    if r.kind in CHAINED_KINDS:
         kind += f" ({r.executed_per_chunk} executed each)"
     rows = [
         ("prompt", f"<b>{esc(r.prompt or '—')}</b>"),

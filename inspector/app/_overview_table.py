@@ -19,14 +19,14 @@ from typing import Any, cast
 
 from ..report.compare import compare_reports
 from ..report.figures import report_figures
-from ..report.html import figure_html
+from ..report.html import KIND_LABELS, figure_html
 from ._overview_rows import OverviewRow
 
 SCOPE = "inspector-overview"  # the class of the overview's elements; its styles apply under it
 ALL_KINDS, ALL_SESSIONS, NO_COMPARE = "all kinds", "all sessions", "— none —"
 FAILED = "failed episodes"  # a simulated evaluation's episodes that did not succeed
 KIND_FILTERS = {ALL_KINDS: None, "single-chunk": "single_chunk", "autoregressive": "autoregressive",
-                "errors": "error", FAILED: "failed"}
+                "open-loop replay": "open_loop_replay", "errors": "error", FAILED: "failed"}
 PICKER_ORDER = "picker order"
 DELTA_RMSE = "Δ RMSE (B − A)"
 # Rows drawn in the table at most: the page holds what is on screen, filters narrow the rest.
@@ -261,7 +261,7 @@ def _columns(views: Sequence[str], notes: Mapping[str, Note], comparison: Compar
         return notes.get(r.key, Note())
 
     def kind(r: OverviewRow) -> str:
-        return {"single_chunk": "single", "autoregressive": "AR"}.get(r.kind, r.kind)
+        return KIND_LABELS.get(r.kind, r.kind)
 
     def episode(r: OverviewRow) -> str:
         s = r.summary

@@ -31,6 +31,7 @@ from typing import Any, cast
 import numpy as np
 
 from ..analysis.metrics import prompt_divergence
+from ..data.session import CHAINED_KINDS
 from ..errors import InspectorError
 from ..units import JOINT_NAMES
 from . import _playback_clip
@@ -220,7 +221,8 @@ class TabState:
         self._set_quietly(c.step_in_chunk, 0)
         c.chunk.max = max(tl.n_chunks - 1, 0)
         c.step_in_chunk.max = max(tl.steps_per_chunk - 1, 0)
-        c.step_in_chunk.label = {"autoregressive": "Step in chunk", "episode": "Frame"}.get(tl.kind, "Step")
+        c.step_in_chunk.label = ("Step in chunk" if tl.kind in CHAINED_KINDS else
+                                 "Frame" if tl.kind == "episode" else "Step")
         # one chunk (a single-chunk sample, an episode): no chunk slider or chunk buttons
         c.chunk.visible = c.nav.visible = tl.n_chunks > 1
         cmp = self.compare

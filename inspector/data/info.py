@@ -11,7 +11,7 @@ from .importers import dreamzero_offline, lerobot_eval
 from .importers.groot_dreams import LAYOUT as GROOT_DREAMS
 from .importers.groot_dreams import NeuralTrajectories, describe_layout, format_layout, is_groot_dreams
 from .lerobot_dataset import INFO_PATH, LeRobotDataset, is_lerobot_dataset
-from .session import is_rollout, is_session, load_rollout, open_session
+from .session import CHAINED_KINDS, is_rollout, is_session, load_rollout, open_session
 from .sources import no_layout_fits
 
 
@@ -86,11 +86,11 @@ def format_info(info: dict[str, Any]) -> str:
                   f"units: {info['units_label']}",
                   f"GT source: {info.get('gt_dataset') or gt.get('repo_id') or 'carried with each rollout, or none'}"]
     width = max([16] + [len(r["tag"]) for r in info["rollouts"]])
-    lines.append(f"{'tag':<{width}} {'kind':<15} {'chunks':>6} {'horizon':>7} {'exec':>4}  {'GT joints':<9}  views")
+    lines.append(f"{'tag':<{width}} {'kind':<16} {'chunks':>6} {'horizon':>7} {'exec':>4}  {'GT joints':<9}  views")
     for r in info["rollouts"]:
         # a single chunk is judged on its whole horizon: "executed" does not apply
-        executed = r["executed_per_chunk"] if r["kind"] == "autoregressive" else "-"
-        lines.append(f"{r['tag']:<{width}} {r['kind']:<15} {r['n_chunks']:>6} {r['horizon']:>7} "
+        executed = r["executed_per_chunk"] if r["kind"] in CHAINED_KINDS else "-"
+        lines.append(f"{r['tag']:<{width}} {r['kind']:<16} {r['n_chunks']:>6} {r['horizon']:>7} "
                      f"{executed:>4}  {'yes' if r['has_gt_joints'] else 'no':<9}  "
                      f"{', '.join(r['views'])}")
     for tag, err in info.get("errors", {}).items():

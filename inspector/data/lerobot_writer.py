@@ -94,7 +94,8 @@ class EpisodeData:
 
 def write_lerobot_dataset(root: str | Path, episodes: list[EpisodeData], fps: int = 30,
                           robot_type: str = "so101_follower", *, units: Units | None = Units(),
-                          overwrite: bool = False, crf: int = 23, joint_names: bool = True) -> Path:
+                          overwrite: bool = False, crf: int = 23, joint_names: bool = True,
+                          keyframe_every: int | None = None) -> Path:
     """Write ``episodes`` as a LeRobot v3.0 dataset at ``root``, atomically.
 
     The dataset is built in a temporary directory next to ``root`` and renamed into place when
@@ -112,6 +113,8 @@ def write_lerobot_dataset(root: str | Path, episodes: list[EpisodeData], fps: in
         crf: H.264 quality (lower is better, 18 near-lossless).
         joint_names: name the six joints in ``features`` (False writes ``names: null``, as
             ``lerobot-eval`` records them).
+        keyframe_every: frames at most between keyframes (None: x264's 250; LeRobot writes 2, so
+            any frame decodes on its own quickly).
 
     Returns:
         ``root`` as a Path.
@@ -131,7 +134,7 @@ def write_lerobot_dataset(root: str | Path, episodes: list[EpisodeData], fps: in
     tmp = root.parent / f".{root.name}.tmp-{uuid.uuid4().hex[:8]}"
     tmp.mkdir()
     try:
-        _write_all(tmp, episodes, cameras, fps, robot_type, units, crf, joint_names)
+        _write_all(tmp, episodes, cameras, fps, robot_type, units, crf, joint_names, keyframe_every)
         _replace_dir(tmp, root)
     finally:
         if tmp.exists():
@@ -178,7 +181,7 @@ def _validate(root: Path, episodes: list[EpisodeData]) -> list[str]:
 # ==================================================================================================
 
 def _write_all(out: Path, episodes: list[EpisodeData], cameras: list[str], fps: int, robot_type: str,
-               units: Units | None, crf: int, joint_names: bool = True) -> None:
+               units: Units | None, crf: int, joint_names: bool = True, keyframe_every: int | None = None) -> None:
     tasks: list[str] = []  # task_index order = order of first appearance
     for ep in episodes:
         if ep.task not in tasks:
@@ -191,7 +194,7 @@ def _write_all(out: Path, episodes: list[EpisodeData], cameras: list[str], fps: 
     for cam in cameras:
         frames = np.concatenate([ep.frames[cam] for ep in episodes])
         path = out / V30_DEFAULT_VIDEO_PATH.format(video_key=IMAGE_PREFIX + cam, chunk_index=0, file_index=0)
-        encode_h264(path, frames, fps, crf=crf)
+        encode_h264(path, frames, fps, crf=crf, keyframe_every=keyframe_every)
         h, w = frames.shape[1:3]
         video_shapes[cam] = (h + h % 2, w + w % 2)
 

@@ -58,10 +58,15 @@ STATES_FILE = "states.npy"
 VIDEO_DIR = "video"
 GT_DIR = "gt"
 
-# "episode": a LeRobot episode shown like a rollout (commanded vs measured arm), made in memory
-# (inspector.data.episodes); sessions on disk hold the other two.
-RolloutKind = Literal["single_chunk", "autoregressive", "episode"]
-KINDS: tuple[str, ...] = ("single_chunk", "autoregressive")
+# "open_loop_replay": a chunk every executed_per_chunk steps along a real episode, each predicted
+# from the real observation at its start (``inspector eval --every-chunk``), not from the last
+# chunk's end as an autoregressive rollout's are. "episode": a LeRobot episode shown like a
+# rollout (commanded vs measured arm), made in memory (inspector.data.episodes); sessions on
+# disk hold the other three.
+RolloutKind = Literal["single_chunk", "autoregressive", "open_loop_replay", "episode"]
+KINDS: tuple[str, ...] = ("single_chunk", "autoregressive", "open_loop_replay")
+# Kinds whose chunks follow one another along the episode, each running executed_per_chunk steps.
+CHAINED_KINDS: tuple[str, ...] = ("autoregressive", "open_loop_replay")
 _TAG = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,127}$")
 _VIEW = _TAG
 # Joint values beyond this are no angle or gripper reading; it also keeps every squared distance
@@ -154,7 +159,7 @@ class Rollout:
         """Timeline steps each chunk covers: an autoregressive rollout executes the first
         ``executed_per_chunk`` actions of each chunk; a single chunk (or an episode, one chunk of
         all its frames) is judged on its whole horizon."""
-        return self.executed_per_chunk if self.kind == "autoregressive" else self.horizon
+        return self.executed_per_chunk if self.kind in CHAINED_KINDS else self.horizon
 
     def executed_actions(self) -> npt.NDArray[np.float64]:
         """(n_steps, 6) the actions that run, chained chunk after chunk (see :attr:`steps_per_chunk`)."""
@@ -783,7 +788,7 @@ class SessionWriter:
 
         Args:
             tag: directory name, letters/digits/``_.-``.
-            kind: ``"single_chunk"`` or ``"autoregressive"``.
+            kind: ``"single_chunk"``, ``"autoregressive"`` or ``"open_loop_replay"``.
             actions: (n_chunks, horizon, 6) predicted chunks in the session's units.
             states: optional (n_chunks + 1, 6) state before each chunk.
             videos: ``{view: frames (N, H, W, 3) uint8 | path to a video}``; paths are copied if

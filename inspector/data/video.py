@@ -324,12 +324,12 @@ def decode(path: str | Path, start_s: float | None = None, end_s: float | None =
 
 
 def encode_h264(path: str | Path, frames: Iterable[npt.NDArray[np.uint8]], fps: float, crf: int = 23,
-                preset: str = "medium") -> int:
+                preset: str = "medium", keyframe_every: int | None = None) -> int:
     """Write RGB frames ((H, W, 3) uint8 each, any iterable) as H.264 (yuv420p) MP4, atomically.
 
     Frames are encoded as they arrive, so a generator streams a clip of any length through one
     frame of memory. Odd sizes are padded to even (yuv420p needs it). The file appears complete
-    or not at all.
+    or not at all. ``keyframe_every`` frames at most between keyframes (x264's default: 250).
 
     Returns:
         The number of frames written.
@@ -344,7 +344,7 @@ def encode_h264(path: str | Path, frames: Iterable[npt.NDArray[np.uint8]], fps: 
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}.mp4")
     try:
         with av.open(str(tmp), mode="w") as container:
-            n = _encode_h264_into(container, frames, fps, crf, preset, path)
+            n = _encode_h264_into(container, frames, fps, crf, preset, path, keyframe_every)
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..data.episodes import episode_tag
 from ..data.lerobot_dataset import dataset_name
+from ..data.session import CHAINED_KINDS
 from ..data.sources import open_sources
 from ..errors import InspectorError
 from ..jobs.pool import default_jobs
@@ -24,6 +25,12 @@ from ..units import DEFAULT_LIMIT_MARGIN_DEG, JOINT_NAMES
 from .rows import aggregate, prompt_divergence_record, prompt_pairs
 from .tasks import EpisodeTask, Task, plan_episode_tasks, plan_tasks, run_tasks, run_tasks_on_ray
 from .trajectories import TRAJECTORY_LAYOUT, trajectory_table
+
+CHAINED_TITLES = {
+    "autoregressive": "Autoregressive rollouts (drift in data units; post-episode samples excluded)",
+    "open_loop_replay": "Open-loop replays (each chunk from the real observation at its start; drift in data "
+                        "units; post-episode samples excluded)",
+}
 
 
 def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | None = None,
@@ -165,7 +172,7 @@ def format_report(report: dict[str, Any]) -> str:
     lines: list[str] = _episode_table(report.get("episodes", [])) + trajectory_table(report.get("neural_trajectories", []))
     evaluated = [r for r in rows if r.get("outcome")]
     single = [r for r in rows if r["kind"] == "single_chunk" and not r.get("outcome")]
-    auto = [r for r in rows if r["kind"] == "autoregressive"]
+    chained = {kind: [r for r in rows if r["kind"] == kind] for kind in CHAINED_KINDS}
     views = sorted({v for r in rows for v in r["video_psnr_db"]})
     psnr_head = "".join(f" {'PSNR ' + v:>11}" for v in views)
     width = max([18] + [len(r["tag"]) for r in rows])
@@ -185,8 +192,10 @@ def format_report(report: dict[str, Any]) -> str:
                          f"{r['limit_violations']['steps']:>9}{psnr_cells(r)}  {r['prompt']}")
         lines.append("")
     lines += _evaluated_table(evaluated, report["aggregate"].get("success_by_task", []))
-    if auto:
-        lines += ["Autoregressive rollouts (drift in data units; post-episode samples excluded)",
+    for kind, auto in chained.items():
+        if not auto:
+            continue
+        lines += [CHAINED_TITLES[kind],
                   f"{'rollout':<{width}} {'chunks':>6} {'time-al.':>9} {'final':>8} {'best-m.':>8} {'DTW':>7} "
                   f"{'tempo':>6} {'EE mm':>7} {'post':>5} {'lim.steps':>9}{psnr_head}  prompt"]
         for r in auto:

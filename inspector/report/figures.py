@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from ..data.session import CHAINED_KINDS
 from ..units import JOINT_NAMES
 from .svg import N_COLOURS, Axes, colour_class, nice_ticks
 
@@ -231,7 +232,7 @@ def drift_curves(rows: Sequence[Row], metric: str = "time_aligned_drift") -> dic
         ``mean`` (max n_chunks,) over rollouts, [data units].
     """
     used = [(i, r) for i, r in enumerate(rows)
-            if r["kind"] == "autoregressive" and r.get(metric) and r[metric].get("per_chunk")]
+            if r["kind"] in CHAINED_KINDS and r.get(metric) and r[metric].get("per_chunk")]
     if not used:
         return None
     xs, ys, inside = [], [], []

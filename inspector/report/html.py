@@ -35,6 +35,8 @@ from .svg import legend_html
 
 Row = dict[str, Any]
 ASSETS = "assets"
+# A rollout kind in a table's few characters.
+KIND_LABELS = {"single_chunk": "single", "autoregressive": "AR", "open_loop_replay": "replay"}
 
 
 def _asset(name: str) -> str:
@@ -83,8 +85,8 @@ def _columns(rows: Sequence[Row], views: list[str]) -> list[tuple[str, str, bool
     if len({r.get("session") for r in rows}) > 1:
         cols.append(("session", "session name", False, lambda r: r.get("session") or "-"))
     cols += [
-        ("kind", "single-chunk or autoregressive", False,
-         lambda r: "single" if r["kind"] == "single_chunk" else "AR"),
+        ("kind", "single-chunk, autoregressive or open-loop replay", False,
+         lambda r: KIND_LABELS.get(r["kind"]) or str(r["kind"])),
         ("ep", "GT episode index", True, lambda r: _f(r["episode_index"], "d")),
         ("start", "start frame in the episode", True, lambda r: _f(r["start_frame"], "d")),
         ("chunks", "predicted chunks", True, lambda r: _f(r["n_chunks"], "d")),
@@ -137,7 +139,10 @@ def _summary(report: dict[str, Any]) -> str:
     rows, agg = report["rollouts"], report["aggregate"]
     n_single = sum(r["kind"] == "single_chunk" for r in rows)
     with_limits = sum(r["limit_violations"]["steps"] > 0 for r in rows)
-    cards = [(str(agg["n"]), f"rollouts ({n_single} single-chunk, {len(rows) - n_single} autoregressive)"),
+    n_replay = sum(r["kind"] == "open_loop_replay" for r in rows)
+    kinds = f"{n_single} single-chunk, {len(rows) - n_single - n_replay} autoregressive" + (
+        f", {n_replay} open-loop replay" if n_replay else "")
+    cards = [(str(agg["n"]), f"rollouts ({kinds})"),
              (_f(agg["mean_rmse_deg"], ".3f"), "mean RMSE [deg]"),
              (_f(agg["median_rmse_deg"], ".3f"), "median RMSE [deg]"),
              (f'{_f(agg["best_rmse_deg"], ".3f")} / {_f(agg["worst_rmse_deg"], ".3f")}', "best / worst RMSE [deg]")]
@@ -268,6 +273,19 @@ def _episode_table(rows: Sequence[Row]) -> str:
     return "".join(out)
 
 
+def _trajectory_table(rows: Sequence[Row]) -> str:
+    """Neural trajectories (no GT, so no drift): length, rate, steps past a limit, task, warnings."""
+    head = "".join(f"<th>{h}</th>" for h in ("dataset", "episode", "steps", "fps", "steps past a limit",
+                                               "calibration", "task", "warnings"))
+    out = [f'<table id="trajectories"><thead><tr>{head}</tr></thead><tbody>']
+    for r in rows:
+        cells = (r["dataset"], r["episode_index"], r["length"], f"{r['fps']:g}", r["limit_violations"]["steps"],
+                 r["calibration"], r["task"], "; ".join(r["warnings"]))
+        out.append("<tr>" + "".join(f"<td>{escape(str(c))}</td>" for c in cells) + "</tr>")
+    out.append("</tbody></table>")
+    return "".join(out)
+
+
 def _episode_summary(rows: Sequence[Row]) -> str:
     n = episode_summary_numbers(rows)
     worst = n["worst"]
@@ -300,13 +318,14 @@ def render_report_html(report: dict[str, Any], title: str | None = None,
         rrd_links: row index -> link of its ``.rrd`` (:func:`find_rrd_links`).
 
     Raises:
-        ValueError: the report has neither rollouts nor episodes (``build_report`` never
+        ValueError: the report has no rollouts, episodes or neural trajectories (``build_report`` never
             returns such a report).
     """
     rows = report["rollouts"]
     episodes = report.get("episodes", [])
-    if not rows and not episodes:
-        raise ValueError("a report without rollouts or episodes has no page")
+    trajectories = report.get("neural_trajectories", [])
+    if not rows and not episodes and not trajectories:
+        raise ValueError("a report without rollouts, episodes or neural trajectories has no page")
     title = title or ("Evaluation report" if rows else "Dataset report")
     links = rrd_links or {}
     when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
@@ -317,6 +336,8 @@ def render_report_html(report: dict[str, Any], title: str | None = None,
     if episodes:
         datasets = list(dict.fromkeys(str(e["dataset"]) for e in episodes))
         what.append(f"{len(episodes)} episode(s) of dataset(s) {escape(', '.join(datasets))}")
+    if trajectories:
+        what.append(f"{len(trajectories)} neural trajector{'y' if len(trajectories) == 1 else 'ies'}")
     meta = (" and ".join(what) + (f" ({escape(', '.join(map(str, sources)))})" if sources else "")
             + f" &middot; inspector {escape(_version())} &middot; {when}")
     body = []
@@ -334,6 +355,9 @@ def render_report_html(report: dict[str, Any], title: str | None = None,
             f'<div class="figures">{figures}</div>'
             f"<h2>Episodes</h2>{_table_tools(len(episodes), 'filter-episodes', 'shown-episodes', 'filter rows (task, dataset ...)')}"
             f'<div class="table-wrap">{_episode_table(episodes)}</div>')
+    if trajectories:
+        body.append(f"<h2>Neural trajectories</h2>{_errors(report) if not rows and not episodes else ''}"
+                    f'<div class="table-wrap">{_trajectory_table(trajectories)}</div>')
     definitions = (_DEFINITIONS if rows else []) + (_EPISODE_DEFINITIONS if episodes else [])
     defs = "".join(f"<dt>{escape(k)}</dt><dd>{escape(v)}</dd>" for k, v in definitions)
     return (
