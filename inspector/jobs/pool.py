@@ -10,6 +10,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import signal
+import sys
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
@@ -80,3 +81,16 @@ def default_jobs() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # not on Linux
         return max(1, os.cpu_count() or 1)
+
+
+def worker_count(requested: int | None, tasks: int) -> int:
+    """Worker processes for ``tasks`` jobs: ``requested`` (``--jobs``; default one per core), but
+    never more than there are cores or tasks, since each idle worker is a whole interpreter
+    (~175 MB). When that is fewer than asked, one ``note:`` line on stderr says why."""
+    cores = default_jobs()
+    workers = max(1, min(cores if requested is None else requested, cores, tasks))
+    if requested is not None and workers < requested and tasks:
+        print(f"note: --jobs {requested}: using {workers} worker{'s' if workers != 1 else ''} "
+              f"({cores} core{'s' if cores != 1 else ''}, {tasks} task{'s' if tasks != 1 else ''})",
+              file=sys.stderr)
+    return workers
