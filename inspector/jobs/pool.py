@@ -64,7 +64,11 @@ def interruptible(fn: Callable[[Any], R], job: Any) -> R:
 
 
 def init_worker() -> None:
-    """One thread per worker process: the pool already keeps every core busy."""
+    """One thread per worker process: the pool already keeps every core busy. A cache warning is
+    handed back with the job's result, so that the command says it once, not once per worker."""
+    from ..cache import hold_warnings
+
+    hold_warnings()
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[var] = "1"  # before numpy loads in this process
     # Imported here, not at the top: these variables must be set before numpy loads.

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from ..cache import warn_once
 from ..data.episodes import episode_tag
 from ..data.lerobot_dataset import dataset_name
 from ..data.sources import open_sources
@@ -78,6 +79,7 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
         running = run_tasks(tasks, worker_count(jobs, len(tasks))) if ray is None else _on_ray(tasks, ray, ray_jobs)
         for outcomes in running:
             for o in outcomes:
+                warn_once(o.cache_warning)
                 if o.row is not None:
                     rows[(o.session_root, o.tag)] = o.row
                     n_cached += o.cached
