@@ -24,7 +24,7 @@ from __future__ import annotations
 import functools
 import math
 import types
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Annotated, Any, Literal, Union, get_args, get_origin, get_type_hints, is_typeddict
 
@@ -46,69 +46,97 @@ class Keys:
         object.__setattr__(self, "names", tuple(names))
 
 
+Check = Callable[[Any, str], "str | None"]
+
+
 def mismatch(value: Any, tp: Any, where: str = "") -> str | None:
     """Where and how ``value`` (parsed JSON) departs from ``tp``, or None when it conforms."""
-    if tp is Any:
-        return None
-    origin = get_origin(tp)
-    if origin is Annotated:
-        inner, *constraints = get_args(tp)
-        return mismatch(value, inner, where) or _constraint_mismatch(value, constraints, where)
-    if origin in (Union, types.UnionType):
-        alternatives = get_args(tp)
-        if any(mismatch(value, alt, where) is None for alt in alternatives):
-            return None
-        return _say(where, " or ".join(_name(alt) for alt in alternatives), value)
-    if origin is Literal:
-        return None if value in get_args(tp) and type(value) in (str, int, bool) else _say(where, f"one of {get_args(tp)}", value)
-    if is_typeddict(tp):
-        return _typeddict_mismatch(value, tp, where)
-    if origin is list:
-        if not isinstance(value, list):
-            return _say(where, "a list", value)
-        (item,) = get_args(tp)
-        if item in _FAST_ITEMS and all(type(v) is float and math.isfinite(v) or v is None and item is not float
-                                       for v in value):
-            return None  # per-frame series: thousands of numbers, checked in one pass
-        return next((m for i, v in enumerate(value) if (m := mismatch(v, item, f"{where}[{i}]"))), None)
-    if origin is dict:
-        if not isinstance(value, dict):
-            return _say(where, "an object", value)
-        key_type, item = get_args(tp)
-        assert key_type is str, "JSON keys are strings"
-        return next((m for k, v in value.items() if (m := mismatch(v, item, _join(where, k)))), None)
-    if tp is float:
-        ok = type(value) is float and math.isfinite(value)
-        return None if ok else _say(where, "a finite float", value)
-    if tp is int:
-        return None if type(value) is int else _say(where, "an integer", value)
-    if tp in (str, bool):
-        return None if type(value) is tp else _say(where, _name(tp), value)
-    if tp is None or tp is type(None):
-        return None if value is None else _say(where, "null", value)
-    raise TypeError(f"mismatch() cannot check {tp!r}")
-
-
-_FAST_ITEMS = (float, float | None)
-
-
-def _typeddict_mismatch(value: Any, tp: Any, where: str) -> str | None:
-    if not isinstance(value, dict):
-        return _say(where, f"an object ({tp.__name__})", value)
-    fields = _fields(tp)
-    if list(value) != list(fields):
-        missing = [k for k in fields if k not in value]
-        extra = [k for k in value if k not in fields]
-        what = (f"no {missing[0]!r}" if missing else f"an unknown key {extra[0]!r}" if extra
-                else "its keys out of order")
-        return f"{where or 'the record'}: {what}"
-    return next((m for k, field in fields.items() if (m := mismatch(value[k], field, _join(where, k)))), None)
+    return _checker(tp)(value, where)
 
 
 @functools.cache
-def _fields(tp: Any) -> dict[str, Any]:
-    """A TypedDict's fields and their types, in declaration order (resolved once)."""
-    return get_type_hints(tp, include_extras=True)
+def _checker(tp: Any) -> Check:
+    """The check of ``tp``, built once per type (an entry is checked in one pass, no type lookups)."""
+    if tp is Any:
+        return lambda value, where: None
+    origin = get_origin(tp)
+    if origin is Annotated:
+        inner_type, *constraints = get_args(tp)
+        inner = _checker(inner_type)
+        return lambda value, where: inner(value, where) or _constraint_mismatch(value, constraints, where)
+    if origin in (Union, types.UnionType):
+        return _union_checker(get_args(tp))
+    if origin is Literal:
+        allowed = get_args(tp)
+        return lambda value, where: (None if type(value) in (str, int, bool) and value in allowed
+                                     else _say(where, f"one of {allowed}", value))
+    if is_typeddict(tp):
+        return _typeddict_checker(tp)
+    if origin is list:
+        return _list_checker(get_args(tp)[0])
+    if origin is dict:
+        key_type, item_type = get_args(tp)
+        assert key_type is str, "JSON keys are strings"
+        item = _checker(item_type)
+
+        def check_dict(value: Any, where: str) -> str | None:
+            if not isinstance(value, dict):
+                return _say(where, "an object", value)
+            return next((m for k, v in value.items() if (m := item(v, _join(where, k)))), None)
+        return check_dict
+    if tp is float:
+        return lambda value, where: (None if type(value) is float and math.isfinite(value)
+                                     else _say(where, "a finite float", value))
+    if tp in (int, str, bool):
+        return lambda value, where: None if type(value) is tp else _say(where, _name(tp), value)
+    if tp is None or tp is type(None):
+        return lambda value, where: None if value is None else _say(where, "null", value)
+    raise TypeError(f"mismatch() cannot check {tp!r}")
+
+
+def _union_checker(alternatives: tuple[Any, ...]) -> Check:
+    expected = " or ".join(_name(alt) for alt in alternatives)
+    checks = [_checker(alt) for alt in alternatives if alt is not type(None)]
+    nullable = type(None) in alternatives
+
+    def check_union(value: Any, where: str) -> str | None:
+        if value is None and nullable or any(c(value, where) is None for c in checks):
+            return None
+        # X | None: what is wrong inside X says more than "X or null"
+        return checks[0](value, where) if len(checks) == 1 else _say(where, expected, value)
+    return check_union
+
+
+def _list_checker(item_type: Any) -> Check:
+    item = _checker(item_type)
+    nullable_floats = item_type == float | None  # per-frame series: thousands of numbers, one pass
+
+    def check_list(value: Any, where: str) -> str | None:
+        if not isinstance(value, list):
+            return _say(where, "a list", value)
+        if item_type is float or nullable_floats:
+            if all(type(v) is float and math.isfinite(v) or nullable_floats and v is None for v in value):
+                return None
+        return next((m for i, v in enumerate(value) if (m := item(v, f"{where}[{i}]"))), None)
+    return check_list
+
+
+def _typeddict_checker(tp: Any) -> Check:
+    fields = get_type_hints(tp, include_extras=True)
+    keys = list(fields)
+    checks = [(k, _checker(field)) for k, field in fields.items()]
+
+    def check_record(value: Any, where: str) -> str | None:
+        if not isinstance(value, dict):
+            return _say(where, f"an object ({tp.__name__})", value)
+        if list(value) != keys:
+            missing = [k for k in keys if k not in value]
+            extra = [k for k in value if k not in fields]
+            what = (f"no {missing[0]!r}" if missing else f"an unknown key {extra[0]!r}" if extra
+                    else "its keys out of order")
+            return f"{where or 'the record'}: {what}"
+        return next((m for k, check in checks if (m := check(value[k], _join(where, k)))), None)
+    return check_record
 
 
 def _constraint_mismatch(value: Any, constraints: list[Any], where: str) -> str | None:

@@ -379,3 +379,24 @@ def test_an_output_that_cannot_be_written_is_named(output: str, session: Path, t
     errors = [line for line in out.stderr.splitlines() if line.startswith("error:")]
     assert errors == [f"error: {target}: {what} (No space left on device)"], out.stderr
     assert len(out.stderr.splitlines()) <= 2  # and at most the cache's one warning
+
+
+def test_the_schema_check_says_where_a_value_departs(warm_cache: Path) -> None:
+    """What :func:`inspector.schema.mismatch` accepts and how it names what it refuses."""
+    record = read_back(entry_files(warm_cache)[0])
+    assert record is not None and mismatch(record, MetricsEntry) is None
+    row = record["row"]
+    cases = {
+        "row: an object (RolloutRow) expected, got 5": {**record, "row": 5},
+        "row.rmse_deg: a finite float expected, got '3'": {**record, "row": {**row, "rmse_deg": "3"}},
+        "row.per_joint_rmse: 6 items expected, got 5": {**record, "row": {**row, "per_joint_rmse": [1.0] * 5}},
+        "row.limit_violations.count: an integer expected, got True": {**record, "row": {
+            **row, "limit_violations": {**row["limit_violations"], "count": True}}},
+        "row.tempo: a finite float expected, got inf": {**record, "row": {**row, "tempo": float("inf")}},
+        "row: an unknown key 'extra'": {**record, "row": {**row, "extra": 1}},
+        "row: its keys out of order": {**record, "row": dict(reversed(row.items()))},
+        "row.kind: one of ('single_chunk', 'autoregressive', 'episode') expected, got 'x'": {
+            **record, "row": {**row, "kind": "x"}},
+    }
+    for expected, value in cases.items():
+        assert mismatch(value, MetricsEntry) == expected
