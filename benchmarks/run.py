@@ -234,6 +234,61 @@ def bench_report(tmp: Path, quick: bool) -> list[Figure]:
     return figures
 
 
+def _groot_dump(tmp: Path, n: int) -> Path:
+    """A GR00T-Dreams IDM dump of ``n`` 93-step episodes (the test suite's writer; the videos are
+    hard links of one 256x256 clip, the parquet files one per episode as the dump writes them)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    sys.path.insert(0, str(REPO / "tests"))
+    from groot_dreams_layout import write_groot_dreams
+
+    root = write_groot_dreams(tmp / f"groot_{n}", [("pick the grape", 93)])
+    lines = [json.dumps({"episode_index": e, "tasks": ["pick the grape"], "length": 93, "video_id": f"c{e}"})
+             for e in range(n)]
+    (root / "meta" / "episodes.jsonl").write_text("\n".join(lines) + "\n")
+    first = root / "data" / "chunk-000" / "episode_000000.parquet"
+    video = root / "videos" / "chunk-000" / "observation.images.webcam" / "episode_000000.mp4"
+    table = pq.read_table(first)
+    column = table.column_names.index("episode_index")
+    for e in range(1, n):
+        pq.write_table(table.set_column(column, "episode_index", pa.array([e] * 93, pa.int64())),
+                       first.with_name(f"episode_{e:06d}.parquet"))
+        os.link(video, video.with_name(f"episode_{e:06d}.mp4"))
+    return root
+
+
+def bench_groot(tmp: Path, quick: bool) -> list[Figure]:
+    """A GR00T-Dreams dump of 1,000 neural trajectories read as it is: listed in the app (the
+    index only) and reported, vs importing it into a session first (the converter it replaces)."""
+    from inspector.app import InspectorApp
+    from inspector.cache import MetricsCache
+    from inspector.data.sources import open_sources
+
+    n = 300 if quick else 1000
+    dump = _groot_dump(tmp, n)
+    start = time.perf_counter()
+    app = InspectorApp(open_sources([dump], confine=True, datasets=True), port=0,
+                       metrics_cache=MetricsCache(enabled=False))
+    listed = time.perf_counter() - start
+    try:
+        assert len(app.catalog.keys()) == n
+    finally:
+        app.stop()
+    imported = run_process(inspector_cmd("import", "groot-dreams", dump, "-o", tmp / f"groot_session_{n}"))
+    figures = [Figure(f"groot_list_{n}", listed, "s", "< 5 s", listed < 5, None, imported.wall_s, imported.peak_mib,
+                      "the app's picker filled from meta/ alone; baseline: inspector import groot-dreams first")]
+    ours = run_process(inspector_cmd("report", dump, "--json"), env=fresh_cache(tmp))
+    session = run_process(inspector_cmd("report", tmp / f"groot_session_{n}", "--json"), env=fresh_cache(tmp))
+    figures.append(Figure(f"groot_report_{n}", ours.wall_s, "s", "< 10 s and < 1 GB",
+                          ours.wall_s < 10 and ours.peak_mib < 1024, ours.peak_mib,
+                          imported.wall_s + session.wall_s, max(imported.peak_mib, session.peak_mib),
+                          "93-step episodes; baseline: import into a session, then report it"))
+    if len(json.loads(ours.stdout)["neural_trajectories"]) != n:
+        raise AssertionError("the report lost episodes")
+    return figures
+
+
 def _eval_session(tmp: Path, name: str, n: int, video: bool) -> Path:
     dest = tmp / name
     if not dest.exists():
@@ -661,7 +716,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="smaller counts, fewer repetitions")
     parser.add_argument("--json", type=Path, help="also write the figures as JSON")
-    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback keys")
+    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback keys groot")
     args = parser.parse_args(argv)
 
     figures: list[Figure] = []
@@ -678,6 +733,7 @@ def main(argv: list[str] | None = None) -> int:
             ("serve", lambda: bench_serve(tmp, args.quick)),
             ("playback", lambda: bench_playback(tmp, args.quick)),
             ("keys", lambda: bench_keys(tmp, args.quick)),
+            ("groot", lambda: bench_groot(tmp, args.quick)),
         ]
         for name, run in runs:
             if args.only and name not in args.only:

@@ -39,6 +39,12 @@ EXIT_BAD_INPUT = 2
 # Each command imports what it runs when it runs: `inspector info` must not pay for rerun, viser or
 # the metrics (about a second of imports), so these imports stay inside the functions.
 def _cmd_import(args: argparse.Namespace) -> int:
+    if args.format == "groot-dreams":
+        from .data.importers.groot_dreams import import_groot_dreams
+
+        dest = import_groot_dreams(args.src, args.output, calibration=args.calibration, overwrite=args.overwrite)
+        print(f"wrote session {dest}")
+        return 0
     from .data.importers.dreamzero_so101 import import_dreamzero
 
     dest = import_dreamzero(args.src, args.output, dataset=args.dataset, episode=args.episode,
@@ -50,7 +56,7 @@ def _cmd_import(args: argparse.Namespace) -> int:
 def _cmd_info(args: argparse.Namespace) -> int:
     from .data.info import describe, format_info
 
-    info = describe(Path(args.path))
+    info = describe(Path(args.path), calibration=args.calibration)
     _emit(json.dumps(info, indent=2) if args.json else format_info(info))
     return 0
 
@@ -83,7 +89,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
     from .report.build import build_report, format_report
 
     report = build_report(args.paths, dataset=args.dataset, jobs=args.jobs, use_cache=not args.no_cache,
-                          limit_margin_deg=args.limit_margin, ray=args.ray)
+                          limit_margin_deg=args.limit_margin, ray=args.ray, calibration=args.calibration)
     if args.html:
         from .report.html import write_report_html
 
@@ -106,7 +112,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
 
     check_listenable(args.host, args.port)
     serve(args.paths, host=args.host, port=args.port, share=args.share, dataset=args.dataset,
-          cache_mb=args.cache_mb, use_cache=not args.no_cache, exit_when_stopped=True)
+          cache_mb=args.cache_mb, use_cache=not args.no_cache, exit_when_stopped=True,
+          calibration=args.calibration)
     return 0
 
 
@@ -115,7 +122,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
     return export_cli(args.path, args.output, rollout=args.rollout, views=args.views,
                       dataset=args.dataset, use_cache=not args.no_cache, limit_margin_deg=args.limit_margin,
-                      episodes=args.episode, ray=args.ray, jobs=args.jobs)
+                      episodes=args.episode, ray=args.ray, jobs=args.jobs, calibration=args.calibration)
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -199,6 +206,23 @@ def _limit_margin_argument(p: argparse.ArgumentParser) -> None:
                         f"(default {DEFAULT_LIMIT_MARGIN_DEG:g} deg)")
 
 
+def _calibration(text: str) -> str:
+    from .data.importers.calibration import parse_calibration
+
+    try:
+        parse_calibration(text, "none")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+def _calibration_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--calibration", type=_calibration, metavar="SPEC",
+                   help="how a GR00T-Dreams dump's joints map onto the URDF's zeros: gr00t-so100 (its "
+                        "default), lerobot-legacy or none, then JOINT=ZERO[:SIGN] overrides, e.g. "
+                        "gr00t-so100,shoulder_pan=0")
+
+
 def _ray_argument(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
                    help=f"{what} as Ray tasks: a local Ray instance, or the cluster at ADDRESS (auto, "
@@ -259,10 +283,17 @@ def build_parser() -> argparse.ArgumentParser:
     dz.add_argument("--episode", type=_index, help="GT episode index (default: the rollout's own)")
     dz.add_argument("--overwrite", action="store_true", help="replace an existing session")
     dz.set_defaults(func=_cmd_import)
+    gd = fmt.add_parser("groot-dreams", help="a GR00T-Dreams (DreamGen) IDM_dump output: neural trajectories")
+    gd.add_argument("src", help="the dump's directory (meta/, data/, videos/)")
+    gd.add_argument("-o", "--output", required=True, help="session directory to create")
+    gd.add_argument("--overwrite", action="store_true", help="replace an existing session")
+    _calibration_argument(gd)
+    gd.set_defaults(func=_cmd_import)
 
-    p = sub.add_parser("info", help="describe a LeRobot dataset or a session")
+    p = sub.add_parser("info", help="describe a session, a LeRobot dataset or a GR00T-Dreams dump")
     p.add_argument("path")
     p.add_argument("--json", action="store_true", help="machine-readable output")
+    _calibration_argument(p)
     p.set_defaults(func=_cmd_info)
 
     p = sub.add_parser("report", help="drift metrics as tables or JSON")
@@ -279,6 +310,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also write one self-contained page (tables, figures; opens offline)")
     _ray_argument(p, "compute the rollouts")
     _limit_margin_argument(p)
+    _calibration_argument(p)
     p.set_defaults(func=_cmd_report)
 
     p = sub.add_parser("compare", help="two evaluations rollout by rollout (e.g. two checkpoints)")
@@ -303,6 +335,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="memory for video frames sent to browsers, shared by all tabs "
                         f"(default {DEFAULT_FRAME_CACHE_MB})")
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the metrics cache")
+    _calibration_argument(p)
     p.set_defaults(func=_cmd_serve)
 
     p = sub.add_parser("export", help="write a Rerun .rrd recording")
@@ -319,6 +352,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the metrics cache")
     _ray_argument(p, "write the recordings")
     _limit_margin_argument(p)
+    _calibration_argument(p)
     p.set_defaults(func=_cmd_export)
 
     p = sub.add_parser("demo", help="rebuild the bundled demo session")

@@ -95,7 +95,16 @@ def headline_metrics(tl: RolloutTimeline, psnr: dict[str, np.ndarray | None] | N
             rows.append(("video PSNR", ", ".join(f"{v} {m:.1f} dB" for v, m in means.items())))
         elif loading_video:
             rows.append(("video PSNR", "computing…"))
-    return rows + reference_rows(tl.rollout.extra)
+    return rows + reference_rows(tl.rollout.extra) + fact_rows(tl.rollout.extra)
+
+
+def fact_rows(extra: object) -> list[tuple[str, str]]:
+    """What the source's reader says about the rollout (``extra.facts``: name / text pairs, e.g. a
+    neural trajectory's calibration, frame rate, joint ranges and warnings)."""
+    facts = extra.get("facts") if isinstance(extra, dict) else None
+    if not isinstance(facts, list):
+        return []
+    return [(str(f[0]), str(f[1])) for f in facts if isinstance(f, list) and len(f) == 2]
 
 
 def reference_rows(extra: object) -> list[tuple[str, str]]:

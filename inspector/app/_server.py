@@ -134,7 +134,7 @@ def _load_robot() -> SharedRobot:
 def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", port: int = 8080,
           share: bool = False, dataset: str | Path | None = None, block: bool = True,
           cache_mb: float = DEFAULT_FRAME_CACHE_MB, use_cache: bool = True,
-          exit_when_stopped: bool = False) -> InspectorApp:
+          exit_when_stopped: bool = False, calibration: str | None = None) -> InspectorApp:
     """Serve sessions in the browser (the bundled demo when ``paths`` is empty).
 
     Args:
@@ -151,6 +151,7 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
             the command line wants): the interpreter would otherwise wait for background work
             that no one needs any more (a rollout's videos still decoding, meshes loading),
             many seconds on a busy machine.
+        calibration: a GR00T-Dreams dump's calibration (``--calibration``; None: its default).
 
     Returns:
         The :class:`InspectorApp` (``.port``, ``.url``, ``.stop()``, ``.tabs``).
@@ -165,7 +166,7 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
                                  "`inspector demo --rebuild`, or serve a session: `inspector serve PATH`")
         paths = [BUNDLED_DEMO]
     # no link leads out of a root; datasets are browsed episode by episode
-    sources = open_sources(paths, dataset=dataset, confine=True, datasets=True)
+    sources = open_sources(paths, dataset=dataset, confine=True, datasets=True, calibration=calibration)
     try:
         app = InspectorApp(sources, host=host, port=port, cache_mb=cache_mb,
                            metrics_cache=MetricsCache(enabled=use_cache))

@@ -22,6 +22,7 @@ from typing import Final
 
 from ..units import JOINT_NAMES
 from .ground_truth import GroundTruth
+from .importers.groot_dreams import NeuralTrajectories
 from .lerobot_dataset import INFO_PATH, LeRobotDataset, dataset_name
 from .session import ArrayValue, Rollout
 
@@ -39,7 +40,7 @@ class EpisodeRef:
         task: its task string.
     """
 
-    dataset: LeRobotDataset
+    dataset: LeRobotDataset | NeuralTrajectories
     index: int
     length: int
     task: str
@@ -57,17 +58,21 @@ def episode_tag(index: int) -> str:
     return f"episode_{index:06d}"
 
 
-def episode_refs(ds: LeRobotDataset) -> list[EpisodeRef]:
+def episode_refs(ds: LeRobotDataset | NeuralTrajectories) -> list[EpisodeRef]:
     """Every episode of ``ds`` from its metadata alone (no data file is read)."""
     return [EpisodeRef(ds, e.index, e.length, e.task) for e in ds.episodes]
 
 
-def episode_rollout(ds: LeRobotDataset, index: int) -> tuple[Rollout, GroundTruth]:
+def episode_rollout(ds: LeRobotDataset | NeuralTrajectories, index: int) -> tuple[Rollout, GroundTruth]:
     """Episode ``index`` as a one-chunk rollout (``action``) and its GT (``observation.state``).
+
+    A GR00T-Dreams dump's episode is its IDM actions instead, with no GT (:meth:`NeuralTrajectories.rollout`).
 
     Raises:
         InspectorError: no such episode, or its data file is unreadable (naming the file).
     """
+    if isinstance(ds, NeuralTrajectories):
+        return ds.rollout(index)
     ep = ds.episode(index)
     info = ds.episode_info(index)
     n = ep.length

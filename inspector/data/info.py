@@ -1,4 +1,5 @@
-"""``inspector info``: what a LeRobot dataset or a session holds."""
+"""``inspector info``: what a session, a LeRobot dataset or a GR00T-Dreams dump holds; a directory
+no layout fits gets one line naming the layouts it knows (:data:`KNOWN_LAYOUTS`)."""
 
 from __future__ import annotations
 
@@ -6,12 +7,26 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InspectorError
+from .importers.groot_dreams import LAYOUT as GROOT_DREAMS
+from .importers.groot_dreams import LAYOUT_HINT as GROOT_DREAMS_HINT
+from .importers.groot_dreams import LAYOUT_TITLE as GROOT_DREAMS_TITLE
+from .importers.groot_dreams import NeuralTrajectories, describe_layout, format_layout, is_groot_dreams
 from .lerobot_dataset import INFO_PATH, LeRobotDataset, is_lerobot_dataset
 from .session import is_rollout, is_session, load_rollout, open_session
 
+# Every layout ``info`` recognises, (name, what marks it), for the line a directory none fits gets.
+KNOWN_LAYOUTS = [
+    ("session", "session.json"),
+    ("LeRobot dataset", "meta/info.json with codebase_version"),
+    (GROOT_DREAMS_TITLE, GROOT_DREAMS_HINT),
+]
 
-def describe(path: Path) -> dict[str, Any]:
-    """A JSON-ready description of a dataset (``format: lerobot``) or a session (``session``)."""
+
+def describe(path: Path, calibration: str | None = None) -> dict[str, Any]:
+    """A JSON-ready description of a dataset (``format: lerobot``), a session (``session``) or a
+    GR00T-Dreams dump (``groot-dreams``, mapped with ``calibration``)."""
+    if path.is_dir() and is_groot_dreams(path):
+        return describe_layout(NeuralTrajectories(path, calibration))
     # meta/info.json present but unreadable: say what is wrong with it, not "neither ... nor"
     if is_lerobot_dataset(path) or ((path / INFO_PATH).is_file() and not is_session(path)):
         ds = LeRobotDataset(path)
@@ -38,7 +53,8 @@ def describe(path: Path) -> dict[str, Any]:
         return {"format": "session", "rollouts": [_rollout_info(load_rollout(path))]}
     if not path.exists():
         raise InspectorError(path, "not found")
-    raise InspectorError(path, "neither a LeRobot dataset (meta/info.json) nor a session (session.json)")
+    raise InspectorError(path, "no known layout fits; known: " + "; ".join(f"{name} ({mark})"
+                                                                         for name, mark in KNOWN_LAYOUTS))
 
 
 def _rollout_info(r: Any) -> dict[str, Any]:
@@ -54,6 +70,8 @@ def _dataset_has_episode(r: Any) -> bool:
 
 def format_info(info: dict[str, Any]) -> str:
     """Readable table of :func:`describe`'s output."""
+    if info["format"] == GROOT_DREAMS:
+        return format_layout(info)
     if info["format"] == "lerobot":
         lines = [f"LeRobot dataset {info['codebase_version']}, {info['robot_type']}, {info['fps']} fps, "
                  f"cameras: {', '.join(info['cameras']) or 'none'}",

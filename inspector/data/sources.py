@@ -19,6 +19,7 @@ from pathlib import Path
 
 from ..errors import InspectorError
 from .importers.dreamzero_so101 import find_sources, load_in_memory
+from .importers.groot_dreams import is_groot_dreams, open_trajectories
 from .lerobot_dataset import INFO_PATH, REPO_ID, find_dataset, is_lerobot_dataset, open_dataset
 from .session import Rollout, Session, is_rollout, is_session, open_session
 
@@ -51,7 +52,8 @@ class Sources:
 
 
 def open_sources(paths: Sequence[str | Path], dataset: str | Path | None = None,
-                 confine: bool = False, lazy: bool = False, datasets: bool = False) -> Sources:
+                 confine: bool = False, lazy: bool = False, datasets: bool = False,
+                 calibration: str | None = None) -> Sources:
     """Open each path as a session (a rollout path opens its session filtered to that rollout).
 
     A session named more than once (itself, or several of its rollouts) is opened once, holding
@@ -64,7 +66,9 @@ def open_sources(paths: Sequence[str | Path], dataset: str | Path | None = None,
             file in it resolves outside the session directory; the app serves with this on.
         lazy: read rollouts' arrays on first use (``open_session(..., lazy=True)``).
         datasets: also take LeRobot datasets (a directory, or ``org/name`` in the local LeRobot
-            cache) into ``Sources.datasets`` (only their metadata is read).
+            cache) and GR00T-Dreams neural trajectories into ``Sources.datasets`` (only their
+            metadata is read).
+        calibration: a GR00T-Dreams dump's calibration (``--calibration``; None: its default).
 
     Raises:
         InspectorError: a path is missing or is none of the above (or, confined, its
@@ -73,7 +77,7 @@ def open_sources(paths: Sequence[str | Path], dataset: str | Path | None = None,
     out = Sources()
     try:
         for raw in paths:
-            if datasets and _open_dataset(out, raw, confine):
+            if datasets and _open_dataset(out, raw, confine, calibration):
                 continue
             _open_one(out, raw, dataset, confine, lazy)
     except BaseException:
@@ -102,7 +106,9 @@ def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine
         session.rollouts = {k: v for k, v in session.rollouts.items() if k == keep}
         session.errors = {k: v for k, v in session.errors.items() if k == keep}
     else:
-
+        if path.is_dir() and is_groot_dreams(path):  # (serve, report and export take it as a dataset)
+            raise InspectorError(path, "a GR00T-Dreams dump is not a session here; import it first: "
+                                       "inspector import groot-dreams PATH -o SESSION")
         find_sources(path)  # raises a clear error when there is nothing to import
         session_path, handle = load_in_memory(path, dataset=dataset)
         out._temps.append(handle)
@@ -120,9 +126,20 @@ def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine
     out.roots.append(session.root.resolve())
 
 
-def _open_dataset(out: Sources, raw: str | Path, confine: bool) -> bool:
-    """Open ``raw`` into ``out.datasets`` when it names a LeRobot dataset; False when it does not."""
+def _open_dataset(out: Sources, raw: str | Path, confine: bool, calibration: str | None = None) -> bool:
+    """Open ``raw`` into ``out.datasets`` when it names a LeRobot dataset (or a GR00T-Dreams dump);
+    False when it does not."""
     path = Path(os.path.expanduser(raw))
+    if path.is_dir() and is_groot_dreams(path):
+        root = path.resolve()
+        if confine:
+            check_confined(root / INFO_PATH, [root])
+        trajectories = open_trajectories(root, calibration)
+        _ = trajectories.episodes, trajectories.fps  # the index: read now, so a broken one is refused now
+        if all(d.root != trajectories.root for d in out.datasets):
+            out.datasets.append(trajectories)
+            out.roots.append(root)
+        return True
     if path.exists():
         if not (is_lerobot_dataset(path) or ((path / INFO_PATH).is_file() and not is_session(path))):
             return False

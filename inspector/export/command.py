@@ -27,7 +27,7 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
                views: Sequence[str] | None = None, dataset: str | Path | None = None,
                use_cache: bool = True, limit_margin_deg: float | None = None,
                episodes: Sequence[int] | None = None, ray: str | None = None,
-               jobs: int | None = None) -> int:
+               jobs: int | None = None, calibration: str | None = None) -> int:
     """``inspector export``: write one recording per rollout (or dataset episode); returns the exit code.
 
     Args:
@@ -44,6 +44,7 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
         ray: write the recordings as Ray tasks at this address (see :mod:`inspector.jobs.ray`).
         jobs: worker processes writing several recordings (default: one per core); one rollout
             is written in this process.
+        calibration: a GR00T-Dreams dump's calibration (``--calibration``; None: its default).
 
     Bad input prints ``error: <file>: <what>`` to stderr and returns 2; the other rollouts of a
     session are still exported when one of them is broken.
@@ -53,7 +54,7 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
     errors = 0
     try:
         # lazy: workers read the arrays of what they write; one rollout's are read when it is
-        sources = open_sources([path], dataset=dataset, datasets=True, lazy=True)
+        sources = open_sources([path], dataset=dataset, datasets=True, lazy=True, calibration=calibration)
         try:
             if sources.datasets:
                 return _export_episodes(sources.datasets[0], episodes, Path(output), views, margin)

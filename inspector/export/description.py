@@ -47,6 +47,7 @@ def describe(tl: RolloutTimeline, psnr_db: Mapping[str, float | None]) -> str:
         *_limit_rows(tl),
         *[f"| mean video PSNR, {v} | {_fmt(p, ' dB')} |" for v, p in psnr_db.items()],
         *_reference_rows(r.extra),
+        *_fact_rows(r.extra),
         "",
         "## How to read this recording",
         "",
@@ -146,6 +147,15 @@ def _limit_rows(tl: RolloutTimeline) -> list[str]:
     steps = int(tl.limit_violation.any(axis=1).sum())
     detail = ", ".join(f"{j} {int(n)}" for j, n in zip(JOINT_NAMES, per_joint) if n) or "none"
     return [f"| steps with a joint past its limit | {steps} of {tl.n_steps} ({detail}) |"]
+
+
+def _fact_rows(extra: Mapping[str, object]) -> list[str]:
+    """What the source's reader says about the rollout (``extra.facts``: name / text pairs, e.g. a
+    neural trajectory's calibration and frame rate)."""
+    facts = extra.get("facts") if isinstance(extra, Mapping) else None
+    if not isinstance(facts, list):
+        return []
+    return [f"| {k} | {v} |" for k, v in (f for f in facts if isinstance(f, list) and len(f) == 2)]
 
 
 def _reference_rows(extra: Mapping[str, object]) -> list[str]:

@@ -24,12 +24,13 @@ from ..jobs.ray import ray_workers
 from ..units import DEFAULT_LIMIT_MARGIN_DEG, JOINT_NAMES
 from .rows import aggregate, prompt_divergence_record, prompt_pairs
 from .tasks import EpisodeTask, Task, plan_episode_tasks, plan_tasks, run_tasks, run_tasks_on_ray
+from .trajectories import TRAJECTORY_LAYOUT, trajectory_table
 
 
 def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | None = None,
                  use_cache: bool = True, limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG,
                  cache_dir: str | None = None, progress: bool | None = None,
-                 ray: str | None = None) -> dict[str, Any]:
+                 ray: str | None = None, calibration: str | None = None) -> dict[str, Any]:
     """Metrics for every rollout under ``paths`` (and every episode of the LeRobot datasets among
     them); what could not be read is listed under ``errors``.
 
@@ -45,9 +46,11 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
         ray: run the tasks on Ray at this address instead (``local``, ``auto``, ``HOST:PORT``,
             ``ray://HOST:PORT``; see :mod:`inspector.jobs.ray`); ``jobs`` is then a local
             instance's CPUs, or a cluster's tasks at once (default: no limit).
+        calibration: a GR00T-Dreams dump's calibration (``--calibration``; None: its default).
 
     Returns:
-        ``{"rollouts", "aggregate", "prompt_divergence"?, "episodes"?, "warnings"?, "errors"?}``.
+        ``{"rollouts", "aggregate", "prompt_divergence"?, "episodes"?, "neural_trajectories"?,
+        "warnings"?, "errors"?}``.
 
     Raises:
         InspectorError: a path is unusable, or nothing under ``paths`` could be reported (none
@@ -61,7 +64,7 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
     else:
         planned = cores if jobs is None else max(1, jobs)
     # arrays are read by the workers; datasets are reported episode by episode
-    sources = open_sources(paths, dataset=dataset, lazy=True, datasets=True)
+    sources = open_sources(paths, dataset=dataset, lazy=True, datasets=True, calibration=calibration)
     try:
         names = {str(s.root): s.name for s in sources.sessions}
         names.update({str(d.root): dataset_name(d) for d in sources.datasets})
@@ -109,6 +112,10 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
         if divergences:
             report["prompt_divergence"] = divergences
         episodes = [rows[k] for k in keys if k[0] in dataset_roots]
+        trajectories = [e for e in episodes if e.get("layout") == TRAJECTORY_LAYOUT]
+        if trajectories:
+            report["neural_trajectories"] = trajectories
+            episodes = [e for e in episodes if e.get("layout") != TRAJECTORY_LAYOUT]
         if episodes:
             report["episodes"] = episodes
         warnings = [f"{r['tag']}: {r['gt_warning']}" for r in ordered if r.get("gt_warning")]
@@ -162,7 +169,7 @@ def _f(value: Any, fmt: str = ".2f") -> str:
 def format_report(report: dict[str, Any]) -> str:
     """Readable tables: single-chunk rollouts, autoregressive drift, aggregate, prompt pairs."""
     rows = report["rollouts"]
-    lines: list[str] = _episode_table(report.get("episodes", []))
+    lines: list[str] = _episode_table(report.get("episodes", [])) + trajectory_table(report.get("neural_trajectories", []))
     single = [r for r in rows if r["kind"] == "single_chunk"]
     auto = [r for r in rows if r["kind"] == "autoregressive"]
     views = sorted({v for r in rows for v in r["video_psnr_db"]})

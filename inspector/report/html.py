@@ -137,8 +137,9 @@ def _summary(report: dict[str, Any]) -> str:
              (_f(agg["median_rmse_deg"], ".3f"), "median RMSE [deg]"),
              (f'{_f(agg["best_rmse_deg"], ".3f")} / {_f(agg["worst_rmse_deg"], ".3f")}', "best / worst RMSE [deg]")]
     cards += [(f"{v:.2f}", f"mean PSNR {view} [dB]") for view, v in agg["mean_video_psnr_db"].items()]
-    margin = rows[0]["limit_violations"]["margin_deg"]
-    cards.append((str(with_limits), f"rollouts past a joint limit (&gt; {margin:g} deg)"))
+    if rows:  # a report of datasets alone has none
+        margin = rows[0]["limit_violations"]["margin_deg"]
+        cards.append((str(with_limits), f"rollouts past a joint limit (&gt; {margin:g} deg)"))
     out = ['<div class="cards">']
     out += [f'<div class="card"><div class="v">{escape(v)}</div><div class="k">{k}</div></div>' for v, k in cards]
     out.append("</div>")

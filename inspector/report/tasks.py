@@ -24,6 +24,7 @@ from ..analysis.video_metrics import VideoMetrics, compare_clips
 from ..cache import MetricsCache, rollout_key, take_unsaid
 from ..data.episodes import episode_rollout, episode_tag
 from ..data.ground_truth import resolve_ground_truth
+from ..data.importers.groot_dreams import NeuralTrajectories, open_trajectories
 from ..data.lerobot_dataset import open_dataset
 from ..data.session import load_session_rollout, read_session_with_gt
 from ..errors import InspectorError
@@ -31,6 +32,7 @@ from ..jobs.pool import init_worker, interruptible, local_pool
 from ..jobs.ray import RayWorkers
 from .entries import read_entry, write_entry
 from .rows import episode_summary, rollout_summary
+from .trajectories import trajectory_summary
 
 # Rollouts per task at most: a task's rollouts are compared against their GT in one pass, one
 # open decoder each.
@@ -66,11 +68,13 @@ class EpisodeTask:
         dataset_root: the dataset directory.
         indexes: the episodes' indexes.
         limit_margin_deg: joint-limit margin [deg].
+        calibration: a GR00T-Dreams dump's calibration spec (None: a LeRobot dataset).
     """
 
     dataset_root: str
     indexes: tuple[int, ...]
     limit_margin_deg: float
+    calibration: str | None = None
 
     @property
     def session_root(self) -> str:  # where outcomes say they come from
@@ -128,7 +132,8 @@ def plan_episode_tasks(datasets: Sequence[Any], jobs: int, limit_margin_deg: flo
         indexes = [e.index for e in ds.episodes]
         per_task = max(1, min(4 * MAX_TASK_ROLLOUTS, math.ceil(len(indexes) / (2 * max(1, jobs)))))
         for i in range(0, len(indexes), per_task):
-            tasks.append(EpisodeTask(str(ds.root), tuple(indexes[i:i + per_task]), limit_margin_deg))
+            calibration = ds.calibration.spec if isinstance(ds, NeuralTrajectories) else None
+            tasks.append(EpisodeTask(str(ds.root), tuple(indexes[i:i + per_task]), limit_margin_deg, calibration))
     return tasks
 
 
@@ -220,13 +225,15 @@ def _run_episode_task(task: EpisodeTask) -> list[Outcome]:
     """Per-episode rows (tracking error, limits, ranges) of a dataset's episodes."""
     outcomes = []
     try:
-        ds = open_dataset(task.dataset_root)
+        ds = (open_dataset(task.dataset_root) if task.calibration is None
+              else open_trajectories(task.dataset_root, task.calibration))
     except InspectorError as exc:
         return [Outcome(task.dataset_root, tag, error_file=exc.file, error=exc.what) for tag in task.tags]
     for index in task.indexes:
         try:
             rollout, gt = episode_rollout(ds, index)
-            row = episode_summary(build_timeline(rollout, gt=gt, limit_margin_deg=task.limit_margin_deg))
+            tl = build_timeline(rollout, gt=gt, limit_margin_deg=task.limit_margin_deg)
+            row = episode_summary(tl) if rollout.kind == "episode" else trajectory_summary(tl)
             outcomes.append(Outcome(task.dataset_root, episode_tag(index), row=row))
         except InspectorError as exc:
             outcomes.append(Outcome(task.dataset_root, episode_tag(index), error_file=exc.file, error=exc.what))
