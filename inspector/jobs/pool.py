@@ -87,13 +87,17 @@ def default_jobs() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+_NOTED: set[int] = set()  # the --jobs values whose cap this process has said
+
+
 def worker_count(requested: int | None, tasks: int) -> int:
     """Worker processes for ``tasks`` jobs: ``requested`` (``--jobs``; default one per core), but
     never more than there are cores or tasks, since each idle worker is a whole interpreter
     (~175 MB). When that is fewer than asked, one ``note:`` line on stderr says why."""
     cores = default_jobs()
     workers = max(1, min(cores if requested is None else requested, cores, tasks))
-    if requested is not None and workers < requested and tasks:
+    if requested is not None and workers < requested and tasks and requested not in _NOTED:
+        _NOTED.add(requested)  # once per command (compare reports twice)
         print(f"note: --jobs {requested}: using {workers} worker{'s' if workers != 1 else ''} "
               f"({cores} core{'s' if cores != 1 else ''}, {tasks} task{'s' if tasks != 1 else ''})",
               file=sys.stderr)
