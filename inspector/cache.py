@@ -6,8 +6,19 @@ Entries live in the user's cache directory (``$INSPECTOR_CACHE_DIR``, else
 sessions work. An entry's key covers everything its numbers depend on: every file of the rollout
 and of its GT (path, size, modification time), the joint-limit margin, and the code that computes
 them (the package version and the metric modules' source), so a changed input or a new release
-never reads a stale entry. Entries are written atomically; an unreadable one is a miss. A cache
-directory that cannot be written turns the cache off with one warning.
+never reads a stale entry.
+
+An entry is written atomically and read back only when it is whole and is what was written: a
+header line names its key and the SHA-256 of the record that follows, and the record must match
+the type its writer declares (a ``TypedDict``, checked by :func:`inspector.schema.mismatch`).
+Anything else (truncated, edited, another key's file, wrong types) is a miss, computed again and
+written anew.
+
+The cache is optional. One that cannot be written (a file where its directory should be, a
+read-only file system, a full disk) is said once per command, in one ``warning:`` line, and the
+command goes on without it: :func:`note_unusable` keeps the first failure of a process, printed
+at once in a command's own process; a worker process holds it (:func:`hold_warnings`) and hands
+it back with its results (:func:`take_unsaid`), for the command to print (:func:`warn_once`).
 """
 
 from __future__ import annotations
@@ -22,10 +33,13 @@ import threading
 from pathlib import Path
 from typing import Any
 
+from .errors import one_line
+from .schema import mismatch
+
 ENV_DIR = "INSPECTOR_CACHE_DIR"
 # The app's in-memory frame cache (JPEGs sent to browsers, shared by every tab) [MiB].
 DEFAULT_FRAME_CACHE_MB = 256
-SCHEMA = "inspector.metrics-cache/1"
+SCHEMA = "inspector.metrics-cache/2"
 # The modules whose code decides the cached numbers.
 _METRIC_MODULES = ("analysis/metrics.py", "analysis/sweep.py", "analysis/video_metrics.py", "analysis/timeline.py",
                    "robot/kinematics.py", "units.py", "data/ground_truth.py", "report/rows.py", "data/video.py")
@@ -90,7 +104,7 @@ def rollout_key(rollout, gt, limit_margin_deg: float) -> str:
 
 
 class MetricsCache:
-    """Get and put per-rollout records (JSON objects) by key.
+    """Get and put per-rollout records (JSON objects of a declared shape) by key.
 
     Args:
         root: the cache directory (default :func:`default_dir`).
@@ -101,41 +115,107 @@ class MetricsCache:
         self.root = Path(root) if root is not None else default_dir()
         self.enabled = enabled
         self._dir = self.root / "metrics"
-        self._warned = False
-        self._lock = threading.Lock()
 
     def _path(self, key: str) -> Path:
         return self._dir / key[:2] / f"{key}.json"
 
-    def get(self, key: str) -> dict[str, Any] | None:
-        """The record stored under ``key``, or None (missing, unreadable, or another schema)."""
+    def get(self, key: str, shape: Any) -> dict[str, Any] | None:
+        """The record stored under ``key`` if it is whole, is ``key``'s, and matches ``shape`` (a
+        ``TypedDict``); None otherwise (missing, unreadable, edited, of another shape)."""
         if not self.enabled:
             return None
         try:
-            record = json.loads(self._path(key).read_text())
-        except (OSError, ValueError, RecursionError):
+            data = self._path(key).read_bytes()
+        except OSError:
             return None
-        return record if isinstance(record, dict) and record.get("schema") == SCHEMA else None
+        return decode_entry(data, key, shape)
 
-    def put(self, key: str, record: dict[str, Any]) -> None:
-        """Store ``record`` under ``key`` (atomically; a failure to write only warns, once)."""
-        if not self.enabled:
+    def put(self, key: str, record: dict[str, Any], shape: Any) -> None:
+        """Store ``record`` under ``key`` (atomically). A record that does not match ``shape`` (a
+        NaN among its numbers, say) is not kept; a failure to write is noted (:func:`note_unusable`)."""
+        if not self.enabled or mismatch(record, shape) is not None:
             return
         path = self._path(key)
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             fd, tmp = tempfile.mkstemp(prefix=".", suffix=".tmp", dir=path.parent)
             try:
-                with os.fdopen(fd, "w") as fh:
-                    # dumps, not dump: dump streams through the pure-Python encoder (5x slower)
-                    fh.write(json.dumps({**record, "schema": SCHEMA}, allow_nan=False))
+                with os.fdopen(fd, "wb") as fh:
+                    fh.write(encode_entry(key, record))
                 os.replace(tmp, path)
             except BaseException:
                 Path(tmp).unlink(missing_ok=True)
                 raise
-        except (OSError, ValueError) as exc:
-            with self._lock:
-                if not self._warned:
-                    self._warned = True
-                    print(f"warning: metrics cache {self._dir} not written ({exc}); continuing without it",
-                          file=sys.stderr)
+        except OSError as exc:
+            note_unusable(self.root, exc)
+
+
+def encode_entry(key: str, record: dict[str, Any]) -> bytes:
+    """An entry file's bytes: a header line (schema, key, SHA-256 of the rest), then the record."""
+    # dumps, not dump: dump streams through the pure-Python encoder (5x slower)
+    body = json.dumps(record, allow_nan=False).encode()
+    header = json.dumps({"schema": SCHEMA, "key": key, "sha256": hashlib.sha256(body).hexdigest()})
+    return header.encode() + b"\n" + body
+
+
+def decode_entry(data: bytes, key: str, shape: Any) -> dict[str, Any] | None:
+    """The record in an entry file's bytes, or None unless it is whole, ``key``'s and of ``shape``."""
+    head, _, body = data.partition(b"\n")
+    try:
+        header = json.loads(head)
+        if not (isinstance(header, dict) and header.get("schema") == SCHEMA and header.get("key") == key
+                and header.get("sha256") == hashlib.sha256(body).hexdigest()):
+            return None
+        record = json.loads(body, parse_constant=_no_constants)
+    except (ValueError, RecursionError):  # not JSON (or NaN, Infinity), nested past the stack
+        return None
+    return record if mismatch(record, shape) is None else None
+
+
+def _no_constants(name: str) -> None:
+    raise ValueError(f"{name} is not JSON")
+
+
+# -- one warning per command ------------------------------------------------------------------
+
+_unsaid: str | None = None  # this process's first cache failure, not yet printed or handed on
+_said = False  # this process has printed its warning
+_hold = False  # a worker process: hand failures back instead of printing them
+_lock = threading.Lock()  # the app's threads write entries too
+
+
+def note_unusable(where: str | Path, exc: OSError) -> None:
+    """A cache at ``where`` could not be written: printed at once (the first time in this
+    process), or held for the command if this is a worker process."""
+    global _unsaid
+    with _lock:
+        if _said or _unsaid is not None:
+            return
+        _unsaid = (f"warning: cache {one_line(where)} cannot be written ({one_line(exc.strerror or exc)}); "
+                   "continuing without it")
+    if not _hold:
+        warn_once(take_unsaid())
+
+
+def hold_warnings() -> None:
+    """In a worker process: cache failures are handed back (:func:`take_unsaid`), never printed."""
+    global _hold
+    _hold = True
+
+
+def take_unsaid() -> str | None:
+    """The cache warning this process holds (then no longer), for a worker's results."""
+    global _unsaid
+    with _lock:
+        message, _unsaid = _unsaid, None
+    return message
+
+
+def warn_once(message: str | None) -> None:
+    """Print ``message`` (a cache warning, from this process or a worker's), unless one was printed."""
+    global _said
+    with _lock:
+        if message is None or _said:
+            return
+        _said = True
+    print(message, file=sys.stderr, flush=True)

@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import re
 import socket
 import sys
@@ -78,8 +79,32 @@ def _cmd_info(args: argparse.Namespace) -> int:
     from .data.info import describe, format_info
 
     info = describe(Path(args.path), calibration=args.calibration)
-    print(json.dumps(info, indent=2) if args.json else format_info(info))
+    _emit(json.dumps(info, indent=2) if args.json else format_info(info))
     return 0
+
+
+def _emit(text: str) -> None:
+    """Print a command's output. A failure to write it (a full disk) is one line naming the file
+    standard output goes to, and the unwritten rest is dropped (no second error at exit)."""
+    try:
+        print(text)
+        sys.stdout.flush()
+    except BrokenPipeError:
+        raise
+    except OSError as exc:
+        where = _stdout_file()
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # what is still buffered goes nowhere at exit
+        os.close(devnull)
+        raise InspectorError(where, f"cannot write the output ({exc.strerror or exc})") from None
+
+
+def _stdout_file() -> str:
+    """The file standard output is (``out.json`` of ``> out.json``), or ``<stdout>``."""
+    try:
+        return os.readlink(f"/proc/self/fd/{sys.stdout.fileno()}")
+    except (OSError, ValueError):
+        return "<stdout>"
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
@@ -91,7 +116,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
         from .report.html import write_report_html
 
         print(f"wrote {write_report_html(report, args.html, sources=args.paths)}", file=sys.stderr)
-    print(json.dumps(report, indent=2) if args.json else format_report(report))
+    _emit(json.dumps(report, indent=2) if args.json else format_report(report))
     return 0
 
 
@@ -100,7 +125,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
     comparison = build_comparison(args.a, args.b, dataset=args.dataset, jobs=args.jobs,
                                   use_cache=not args.no_cache, limit_margin_deg=args.limit_margin)
-    print(json.dumps(comparison, indent=2) if args.json else format_comparison(comparison))
+    _emit(json.dumps(comparison, indent=2) if args.json else format_comparison(comparison))
     return 0
 
 

@@ -69,3 +69,36 @@ def test_serve_refuses_a_port_in_use_within_seconds() -> None:
 def test_serve_refuses_an_address_not_on_this_machine() -> None:
     out = inspector("serve", "--host", "192.0.2.1", "--port", "0", timeout=60)  # TEST-NET-1: never local
     assert_one_line(out, "error: --port: cannot listen on 192.0.2.1:0 (")
+
+
+@pytest.mark.parametrize("command", [("report", DEMO, "--json"), ("export", DEMO, "-o", "{out}")])
+def test_jobs_past_the_cores_and_tasks_are_capped_in_one_note(tmp_path: Path, command: tuple[str, ...]) -> None:
+    """``--jobs 100000`` starts one worker per core (or per task, if fewer), never 100000 idle
+    interpreters, and says so in one line; the command's output is as usual."""
+    import os
+    import re
+
+    import psutil
+
+    args = [a.replace("{out}", str(tmp_path / "out")) for a in command]
+    with open(tmp_path / "stdout", "w") as stdout:
+        proc = subprocess.Popen([sys.executable, "-m", "inspector", *args, "--jobs", "100000", "--no-cache"],
+                                stdout=stdout, stderr=subprocess.PIPE, text=True, cwd=REPO)
+        parent = psutil.Process(proc.pid)
+        workers: set[int] = set()
+        while proc.poll() is None:  # sample the process tree while it runs
+            try:
+                workers |= {c.pid for c in parent.children(recursive=True) if "spawn_main" in " ".join(c.cmdline())}
+            except psutil.Error:  # a child ended between listing and reading it
+                pass
+            time.sleep(0.05)
+        stderr = proc.stderr.read() if proc.stderr else ""
+    assert proc.returncode == 0, stderr
+    cores = len(os.sched_getaffinity(0))
+    notes = [line for line in stderr.splitlines() if line.startswith("note:")]
+    assert len(notes) == 1, stderr
+    match = re.fullmatch(rf"note: --jobs 100000: using (\d+) workers? \({cores} cores?, (\d+) tasks?\)", notes[0])
+    assert match, notes
+    used, tasks = int(match[1]), int(match[2])
+    assert used == min(cores, tasks)
+    assert 0 < len(workers) <= used, (workers, notes)  # spawned workers seen; the resource tracker is not one

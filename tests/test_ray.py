@@ -112,6 +112,33 @@ def test_addresses_that_are_not_ray_are_refused_in_seconds():
         check_address("sessions/demo")  # --ray ADDRESS swallowed a path
 
 
+@pytest.mark.parametrize("scheme", ["", "ray://"])
+def test_a_grpc_service_that_is_not_ray_is_one_line_within_seconds(tmp_path, scheme):
+    """A real gRPC server (its one service knows nothing of Ray's): ``--ray`` at it is exit 2 and
+    one line within 30 s (Ray itself would retry for minutes)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    import grpc
+
+    echo = grpc.unary_unary_rpc_method_handler(lambda request, context: request)
+    server = grpc.server(ThreadPoolExecutor(max_workers=2))
+    server.add_generic_rpc_handlers([grpc.method_handlers_generic_handler("demo.Echo", {"Say": echo})])
+    port = server.add_insecure_port("127.0.0.1:0")
+    server.start()
+    try:
+        with grpc.insecure_channel(f"127.0.0.1:{port}") as channel:  # it is a working gRPC server
+            assert channel.unary_unary("/demo.Echo/Say")(b"hi", timeout=10) == b"hi"
+        start = time.monotonic()
+        out = inspector("report", DEMO, "--ray", f"{scheme}127.0.0.1:{port}", cache_dir=tmp_path / "cache", timeout=90)
+        assert time.monotonic() - start < 30
+    finally:
+        server.stop(None)
+    assert out.returncode == 2, out.stderr
+    assert out.stderr == (f"error: {scheme}127.0.0.1:{port}: a gRPC service, but not Ray's GCS or Ray Client "
+                          "(it knows neither's methods; by default the GCS listens on port 6379, Ray Client on 10001)\n")
+    assert out.stdout == ""
+
+
 def test_missing_ray_says_how_to_install(monkeypatch):
     monkeypatch.setitem(sys.modules, "ray", None)
     with pytest.raises(InspectorError, match=r"pip install 'inspector\[ray\]'"):

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from typing import TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -20,6 +21,14 @@ from . import metrics
 
 Array = npt.NDArray[np.float64]
 Frame = npt.NDArray[np.uint8]
+
+
+class VideoMetricsRecord(TypedDict):
+    """A view's :class:`VideoMetrics` as JSON (the metrics cache keeps it): null for NaN."""
+
+    view: str
+    psnr_db: list[float | None]
+    ssim: list[float | None] | None
 
 
 @dataclass
@@ -40,13 +49,14 @@ class VideoMetrics:
         v = self.psnr_db[np.isfinite(self.psnr_db)]
         return float(v.mean()) if v.size else None
 
-    def to_json(self) -> dict:
+    def to_json(self) -> VideoMetricsRecord:
         return {"view": self.view, "psnr_db": _floats(self.psnr_db),
                 "ssim": None if self.ssim is None else _floats(self.ssim)}
 
     @classmethod
-    def from_json(cls, data: dict) -> VideoMetrics:
-        return cls(data["view"], _array(data["psnr_db"]), None if data.get("ssim") is None else _array(data["ssim"]))
+    def from_json(cls, data: VideoMetricsRecord) -> VideoMetrics:
+        ssim = data.get("ssim")
+        return cls(data["view"], _array(data["psnr_db"]), None if ssim is None else _array(ssim))
 
 
 def _floats(a: Array) -> list[float | None]:

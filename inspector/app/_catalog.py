@@ -29,6 +29,7 @@ from ..data.lerobot_dataset import dataset_name
 from ..data.session import Rollout, Session
 from ..data.sources import Sources, check_confined
 from ..errors import InspectorError, one_line
+from ..report.entries import read_entry, write_entry
 from ._frames import FrameCache, FrameStore
 from ._scene import RolloutScene
 
@@ -187,17 +188,15 @@ class Catalog:
             return None
 
         key = rollout_key(tl.rollout, tl.gt, tl.limit_margin_deg)
-        record = cache.get(key) or {}
-        for data in (record.get("video") or {}).values():
-            tl.set_video_metrics(VideoMetrics.from_json(data))
+        for view, vm in read_entry(cache, key).video.items():
+            if view in tl.video_views():
+                tl.set_video_metrics(vm)
         lock = threading.Lock()
 
         def remember(vm: VideoMetrics) -> None:
-            with lock:  # views finish on different threads: merge into one record
-                current = cache.get(key) or {}
-                video = dict(current.get("video") or {})
-                video[vm.view] = vm.to_json()
-                cache.put(key, {"row": current.get("row"), "video": video})
+            with lock:  # views finish on different threads: merge into one entry
+                current = read_entry(cache, key)
+                write_entry(cache, key, current.row, {**current.video, vm.view: vm})
 
         return remember
 

@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from ..cache import warn_once
 from ..jobs.pool import init_worker as _init_worker
 from ..report.tasks import Outcome, cached_outcomes, plan_tasks, run_task
 from ..units import DEFAULT_LIMIT_MARGIN_DEG
@@ -166,6 +167,7 @@ class OverviewRows(Notifying):
     def _publish(self, outcomes) -> None:
         with self._lock:
             for o in outcomes:
+                warn_once(o.cache_warning)  # the worker's: the server says it once, as a command does
                 key = self._key_of.get((o.session_root, o.tag))
                 if key is None:
                     continue

@@ -16,7 +16,7 @@ from ..data.episodes import episode_rollout
 from ..data.lerobot_dataset import dataset_name
 from ..data.sources import open_sources
 from ..errors import InspectorError
-from ..jobs.pool import default_jobs
+from ..jobs.pool import worker_count
 from ..progress import FractionBar
 from ..units import DEFAULT_LIMIT_MARGIN_DEG
 from .jobs import export_in_processes, export_on_ray
@@ -66,7 +66,7 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
                 return 2 if export_on_ray(targets, ray, views, margin, use_cache) else 0
             if len(targets) > 1:
 
-                failed = export_in_processes(targets, jobs or default_jobs(), views, margin, use_cache)
+                failed = export_in_processes(targets, worker_count(jobs, len(targets)), views, margin, use_cache)
                 return 2 if failed else 0
             for session, tag, dest in targets:
                 if tag in session.errors:

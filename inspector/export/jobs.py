@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
 
-from ..cache import MetricsCache
+from ..cache import MetricsCache, take_unsaid, warn_once
 from ..data.session import load_session_rollout, read_session_with_gt
 from ..errors import InspectorError
 from ..jobs.pool import init_worker, interruptible, local_pool
@@ -65,6 +65,7 @@ class ExportOutcome:
     error_file: str | None = None
     error: str | None = None
     worker_pid: int | None = None  # the process that wrote it
+    cache_warning: str | None = None  # a cache could not be written (for the driver to say, once)
 
     @classmethod
     def died(cls, job: ExportJob, why: str) -> ExportOutcome:
@@ -80,8 +81,10 @@ def run_export_job(job: ExportJob) -> ExportOutcome:
         dest = export_rollout(rollout, Path(job.dest), job.views, job.limit_margin_deg,
                               MetricsCache(enabled=job.use_cache))
     except InspectorError as exc:
-        return ExportOutcome(job.tag, job.dest, error_file=exc.file, error=exc.what, worker_pid=os.getpid())
-    return ExportOutcome(job.tag, job.dest, size=dest.stat().st_size, worker_pid=os.getpid())
+        return ExportOutcome(job.tag, job.dest, error_file=exc.file, error=exc.what, worker_pid=os.getpid(),
+                             cache_warning=take_unsaid())
+    return ExportOutcome(job.tag, job.dest, size=dest.stat().st_size, worker_pid=os.getpid(),
+                         cache_warning=take_unsaid())
 
 
 def export_on_ray(targets: Sequence[tuple], address: str, views: Sequence[str] | None,
@@ -157,7 +160,7 @@ class _OutcomePrinter:
                                        session.gt_source.get("dataset"), limit_margin_deg, use_cache))
 
     def show(self, outcome: ExportOutcome) -> None:
-
+        warn_once(outcome.cache_warning)
         if outcome.error is not None:
             line, stream = f"error: {InspectorError(outcome.error_file or outcome.tag, outcome.error)}", sys.stderr
             self.failed += 1

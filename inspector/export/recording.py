@@ -33,10 +33,10 @@ import numpy as np
 import rerun as rr
 
 from ..analysis.timeline import RolloutTimeline, build_timeline
-from ..analysis.video_metrics import VideoMetrics
 from ..cache import rollout_key
 from ..data.session import ROLLOUT_FILE
 from ..errors import InspectorError
+from ..report.entries import read_entry, write_entry
 from ..robot.description import VIEW_DIRECTION, bounding_sphere
 from ..robot.kinematics import kinematics
 from . import layout as L
@@ -208,14 +208,14 @@ def cached_video_metrics(tl: RolloutTimeline, cache) -> Iterator[None]:
     """Give ``tl`` the video metrics the metrics cache holds for it; keep the ones computed
     meanwhile there (a rollout the app or ``report`` has seen exports without decoding)."""
     key = rollout_key(tl.rollout, tl.gt, tl.limit_margin_deg)
-    record = cache.get(key) or {}
-    known = dict(record.get("video") or {})
-    for data in known.values():
-        tl.set_video_metrics(VideoMetrics.from_json(data))
+    cached = read_entry(cache, key)
+    known = {v: vm for v, vm in cached.video.items() if v in tl.video_views()}
+    for vm in known.values():
+        tl.set_video_metrics(vm)
     yield
-    new = {v: vm.to_json() for v, vm in tl.known_video_metrics().items() if v not in known}
+    new = {v: vm for v, vm in tl.known_video_metrics().items() if v not in known}
     if new:
-        cache.put(key, {"row": record.get("row"), "video": {**known, **new}})
+        write_entry(cache, key, cached.row, {**known, **new})
 
 
 def export_rollout(rollout, dest: Path, views: Sequence[str] | None, limit_margin_deg: float, cache,

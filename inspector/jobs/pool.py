@@ -10,6 +10,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import signal
+import sys
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
@@ -63,7 +64,11 @@ def interruptible(fn: Callable[[Any], R], job: Any) -> R:
 
 
 def init_worker() -> None:
-    """One thread per worker process: the pool already keeps every core busy."""
+    """One thread per worker process: the pool already keeps every core busy. A cache warning is
+    handed back with the job's result, so that the command says it once, not once per worker."""
+    from ..cache import hold_warnings
+
+    hold_warnings()
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[var] = "1"  # before numpy loads in this process
     # Imported here, not at the top: these variables must be set before numpy loads.
@@ -80,3 +85,20 @@ def default_jobs() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # not on Linux
         return max(1, os.cpu_count() or 1)
+
+
+_NOTED: set[int] = set()  # the --jobs values whose cap this process has said
+
+
+def worker_count(requested: int | None, tasks: int) -> int:
+    """Worker processes for ``tasks`` jobs: ``requested`` (``--jobs``; default one per core), but
+    never more than there are cores or tasks, since each idle worker is a whole interpreter
+    (~175 MB). When that is fewer than asked, one ``note:`` line on stderr says why."""
+    cores = default_jobs()
+    workers = max(1, min(cores if requested is None else requested, cores, tasks))
+    if requested is not None and workers < requested and tasks and requested not in _NOTED:
+        _NOTED.add(requested)  # once per command (compare reports twice)
+        print(f"note: --jobs {requested}: using {workers} worker{'s' if workers != 1 else ''} "
+              f"({cores} core{'s' if cores != 1 else ''}, {tasks} task{'s' if tasks != 1 else ''})",
+              file=sys.stderr)
+    return workers

@@ -145,7 +145,8 @@ def ray_workers(address: str, jobs: int | None = None) -> Iterator[RayWorkers]:
 
 
 def check_address(address: str) -> None:
-    """Refuse a malformed address, and one where nothing accepts a connection (in seconds).
+    """Refuse, in seconds, a malformed address, one where nothing accepts a connection, and one
+    where something else answers (not gRPC, or a gRPC service that is neither Ray's GCS nor Ray Client).
 
     Raises:
         InspectorError: naming the address and what is wrong with it.
@@ -168,6 +169,9 @@ def check_address(address: str) -> None:
     if not speaks_grpc:  # e.g. the dashboard's port: Ray would retry for many minutes
         raise InspectorError(address, "answers, but not as Ray's GCS or Ray Client (both speak gRPC; by "
                                       "default the GCS listens on port 6379, Ray Client on 10001)")
+    if not _serves_ray(endpoint, client_first=address.startswith("ray://")):  # another gRPC service
+        raise InspectorError(address, "a gRPC service, but not Ray's GCS or Ray Client (it knows neither's "
+                                      "methods; by default the GCS listens on port 6379, Ray Client on 10001)")
 
 
 def _answers_http2(conn: socket.socket) -> bool:
@@ -183,6 +187,32 @@ def _answers_http2(conn: socket.socket) -> bool:
     except TimeoutError:
         pass
     return len(head) == 9 and head[3] == 4
+
+
+# A method only Ray's GCS serves, and one only Ray Client serves. Asked with an empty request, any
+# answer but UNIMPLEMENTED (even an error about the request, or a missing token) says Ray is there.
+_GCS_METHOD = "/ray.rpc.NodeInfoGcsService/GetClusterId"
+_CLIENT_METHOD = "/ray.rpc.RayletDriver/ClusterInfo"
+
+
+def _serves_ray(endpoint: tuple[str, int], client_first: bool) -> bool:
+    """False when the gRPC server at ``endpoint`` has neither Ray service (another gRPC server);
+    True otherwise, whatever else goes wrong (Ray itself then says what)."""
+    try:
+        import grpc  # Ray's own dependency
+    except ImportError:
+        return True
+    host, port = endpoint
+    methods = (_CLIENT_METHOD, _GCS_METHOD) if client_first else (_GCS_METHOD, _CLIENT_METHOD)
+    with grpc.insecure_channel(f"[{host}]:{port}" if ":" in host else f"{host}:{port}") as channel:
+        for method in methods:
+            try:
+                channel.unary_unary(method)(b"", timeout=PROBE_TIMEOUT_S)  # bytes in, bytes out
+            except grpc.RpcError as exc:
+                if exc.code() == grpc.StatusCode.UNIMPLEMENTED:
+                    continue
+            return True
+    return False
 
 
 def _auto_endpoint() -> tuple[str, int] | None:

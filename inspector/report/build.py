@@ -14,12 +14,13 @@ from typing import Any
 
 import numpy as np
 
+from ..cache import warn_once
 from ..data.episodes import episode_tag
 from ..data.lerobot_dataset import dataset_name
 from ..data.session import CHAINED_KINDS
 from ..data.sources import open_sources
 from ..errors import InspectorError
-from ..jobs.pool import default_jobs
+from ..jobs.pool import default_jobs, worker_count
 from ..jobs.ray import ray_workers
 from ..units import DEFAULT_LIMIT_MARGIN_DEG, JOINT_NAMES
 from .rows import aggregate, prompt_divergence_record, prompt_pairs
@@ -64,7 +65,11 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
             ``ray`` cannot be used.
     """
     ray_jobs = jobs
-    jobs = default_jobs() if jobs is None else max(1, jobs)
+    cores = default_jobs()
+    if ray is None:  # tasks are cut for the workers that will run them: one per core at most (worker_count)
+        planned = min(jobs or cores, cores)
+    else:
+        planned = cores if jobs is None else max(1, jobs)
     # arrays are read by the workers; datasets are reported episode by episode
     sources = open_sources(paths, dataset=dataset, lazy=True, datasets=True, calibration=calibration)
     try:
@@ -76,13 +81,15 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
             (s, tag) for s in sources.sessions for tag in sorted(s.rollouts))}
         order.update({(str(d.root), episode_tag(e.index)): len(order) + i for i, (d, e) in enumerate(
             (d, e) for d in sources.datasets for e in d.episodes)})
-        tasks: list[Task | EpisodeTask] = [*plan_tasks(sources.sessions, jobs, limit_margin_deg, cache_dir, use_cache),
-                                           *plan_episode_tasks(sources.datasets, jobs, limit_margin_deg)]
+        tasks: list[Task | EpisodeTask] = [*plan_tasks(sources.sessions, planned, limit_margin_deg, cache_dir, use_cache),
+                                           *plan_episode_tasks(sources.datasets, planned, limit_margin_deg)]
         rows: dict[tuple[str, str], dict[str, Any]] = {}
         bar = _progress_bar(len(order), progress)
         n_cached = 0
-        for outcomes in run_tasks(tasks, jobs) if ray is None else _on_ray(tasks, ray, ray_jobs):
+        running = run_tasks(tasks, worker_count(jobs, len(tasks))) if ray is None else _on_ray(tasks, ray, ray_jobs)
+        for outcomes in running:
             for o in outcomes:
+                warn_once(o.cache_warning)
                 if o.row is not None:
                     rows[(o.session_root, o.tag)] = o.row
                     n_cached += o.cached

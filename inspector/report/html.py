@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any, cast
 from urllib.parse import quote
 
+from ..errors import InspectorError
 from ..units import JOINT_NAMES
 from .episode_figures import episode_figures, episode_key, episode_summary_numbers
 from .figures import Figure, report_figures
@@ -381,11 +382,17 @@ def write_report_html(report: dict[str, Any], out: str | Path, sources: Sequence
         raise IsADirectoryError(21, "is a directory, expected an .html file to write", str(out))
     out.parent.mkdir(parents=True, exist_ok=True)
     page = render_report_html(report, sources=sources, rrd_links=find_rrd_links(report["rollouts"], out.parent))
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
+    except OSError as exc:
+        raise InspectorError(out, f"cannot write the page ({exc.strerror or exc})") from None
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(page)
         os.replace(tmp, out)
+    except OSError as exc:  # a full disk: the error names the page, not the temporary file
+        Path(tmp).unlink(missing_ok=True)
+        raise InspectorError(out, f"cannot write the page ({exc.strerror or exc})") from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

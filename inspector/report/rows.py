@@ -1,21 +1,95 @@
 """What ``inspector report`` says about one rollout (a JSON row) and about a set of them.
 
 Rows are small and self-contained, so a report over thousands of rollouts keeps only rows, and
-the metrics cache stores them as they are.
+the metrics cache stores them as they are. A rollout's row is written as :class:`RolloutRow`
+says (mypy checks :func:`rollout_summary` against it), and the cache reads one back only if it
+still is one (:func:`inspector.schema.mismatch`).
 """
 
 from __future__ import annotations
 
 from collections import defaultdict
 from collections.abc import Iterable, Mapping
-from typing import Any
+from typing import Annotated, Any, TypedDict, cast
 
 import numpy as np
 
 from ..analysis import metrics
 from ..analysis.timeline import RolloutTimeline
 from ..analysis.video_metrics import VideoMetrics
+from ..data.session import RolloutKind
+from ..schema import Keys, Length
 from ..units import JOINT_NAMES
+
+PerJoint = Annotated[list[float], Length(len(JOINT_NAMES))]  # JOINT_NAMES order
+
+
+class DriftSummary(TypedDict):
+    """A drift series [deg] over in-episode samples, and its per-chunk means (all samples)."""
+
+    mean: float
+    final: float
+    per_chunk: list[float]
+
+
+class EndEffectorError(TypedDict):
+    """Tool-point distance to GT [mm] over in-episode samples."""
+
+    mean: float
+    final: float
+
+
+class LimitRecord(TypedDict):
+    """See :func:`limit_record`."""
+
+    count: int
+    steps: int
+    by_joint: Annotated[dict[str, int], Keys(JOINT_NAMES)]
+    max_excess: Annotated[dict[str, float], Keys(JOINT_NAMES)]
+    margin_deg: float
+
+
+class WorstChunk(TypedDict):
+    chunk: int
+    by: str
+
+
+class ChunkJoints(TypedDict):
+    """A single chunk's (H, 6) predicted and GT joints (a GT step null past the episode)."""
+
+    pred: list[PerJoint]
+    gt: list[PerJoint | None] | None
+
+
+class RolloutRow(TypedDict):
+    """One rollout in ``inspector report`` (see :func:`rollout_summary`)."""
+
+    tag: str
+    session: str | None
+    kind: RolloutKind
+    prompt: str
+    episode_index: int | None
+    start_frame: int
+    units: str
+    n_chunks: int
+    steps_per_chunk: int
+    episode_length: int | None
+    rmse_deg: float | None
+    per_joint_rmse: PerJoint | None
+    per_step_mse: list[float] | None
+    time_aligned_drift: DriftSummary | None
+    best_match_drift: DriftSummary | None
+    dtw_drift: DriftSummary | None
+    tempo: float | None
+    ee_error_mm: EndEffectorError | None
+    limit_violations: LimitRecord
+    worst_chunk: WorstChunk
+    video_psnr_db: dict[str, float]
+    post_episode_chunks: int | None
+    gt_source: str
+    gt_warning: str | None
+    chunk_joints: ChunkJoints | None
+    outcome: dict[str, Any] | None  # a simulated evaluation's verdict (lerobot-eval): success, rewards, task
 
 
 def _in_episode(tl: RolloutTimeline, series: np.ndarray) -> np.ndarray:
@@ -24,7 +98,7 @@ def _in_episode(tl: RolloutTimeline, series: np.ndarray) -> np.ndarray:
     return inside if inside.size else series
 
 
-def _drift_summary(tl: RolloutTimeline, series: np.ndarray | None) -> dict[str, Any] | None:
+def _drift_summary(tl: RolloutTimeline, series: np.ndarray | None) -> DriftSummary | None:
     """mean / final over in-episode samples, plus the per-chunk means (all samples)."""
     if series is None:
         return None
@@ -34,7 +108,7 @@ def _drift_summary(tl: RolloutTimeline, series: np.ndarray | None) -> dict[str, 
             "per_chunk": [round(float(v), 6) for v in per_chunk]}
 
 
-def limit_record(summary: metrics.LimitSummary, margin_deg: float) -> dict[str, Any]:
+def limit_record(summary: metrics.LimitSummary, margin_deg: float) -> LimitRecord:
     """The ``limit_violations`` field: joint-steps (``count``), steps with any joint past a
     limit (``steps``), per joint, the largest excess per joint (data units), and the margin."""
     return {"count": summary.count, "steps": summary.steps,
@@ -57,7 +131,7 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> d
         post_chunks = int((tl.chunk_start_step >= tl.episode_end_step).sum())
     elif tl.has_gt_joints or tl.gt.episode_length is not None:
         post_chunks = 0
-    ee = None
+    ee: EndEffectorError | None = None
     if tl.ee_error_mm is not None:
         inside = _in_episode(tl, tl.ee_error_mm)
         ee = {"mean": float(inside.mean()), "final": float(inside[-1])}
@@ -66,7 +140,7 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> d
     episode_length = None
     if tl.gt.episode_length is not None:  # counted from the rollout's step 0: back to the episode's start
         episode_length = int(tl.gt.episode_length - tl.gt.offset + r.start_frame)
-    return {
+    row: RolloutRow = {
         "tag": r.tag,
         "session": r.session.name if r.session is not None else None,
         "kind": r.kind,
@@ -95,9 +169,10 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> d
         # a simulated evaluation's verdict (success, rewards, task), as its importer kept it
         "outcome": r.extra.get("outcome"),
     }
+    return cast(dict[str, Any], row)  # a plain dict from here on, as every other report record
 
 
-def _chunk_joints(tl: RolloutTimeline) -> dict[str, Any] | None:
+def _chunk_joints(tl: RolloutTimeline) -> ChunkJoints | None:
     """A single chunk's predicted and GT joints, (H, 6) each (GT null without GT joints, a step
     null past the episode's end), for the overlay figures; null for autoregressive rollouts, whose
     rows stay small."""

@@ -21,7 +21,7 @@ from typing import Any, cast
 
 from ..analysis.timeline import batch_key, build_timeline, build_timelines
 from ..analysis.video_metrics import VideoMetrics, compare_clips
-from ..cache import MetricsCache, rollout_key
+from ..cache import MetricsCache, rollout_key, take_unsaid
 from ..data.episodes import episode_rollout, episode_tag
 from ..data.ground_truth import resolve_ground_truth
 from ..data.importers.groot_dreams import NeuralTrajectories, open_trajectories
@@ -30,6 +30,7 @@ from ..data.session import load_session_rollout, read_session_with_gt
 from ..errors import InspectorError
 from ..jobs.pool import init_worker, interruptible, local_pool
 from ..jobs.ray import RayWorkers
+from .entries import read_entry, write_entry
 from .rows import episode_summary, rollout_summary
 from .trajectories import trajectory_summary
 
@@ -95,6 +96,7 @@ class Outcome:
     error_file: str | None = None
     error: str | None = None
     cached: bool = False
+    cache_warning: str | None = None  # the metrics cache could not be written (a worker's, for the driver to say)
 
 
 def plan_tasks(sessions: Sequence[Any], jobs: int, limit_margin_deg: float, cache_dir: str | None = None,
@@ -180,6 +182,9 @@ def run_task(task: Task | EpisodeTask) -> list[Outcome]:
     outcomes, todo = _look_up(task, session, cache)
     for batch in _batches(todo):
         outcomes += _compute(batch, task, cache)
+    warning = take_unsaid()  # None where this process prints its own warnings
+    if warning is not None and outcomes:
+        outcomes[0] = replace(outcomes[0], cache_warning=warning)
     return outcomes
 
 
@@ -206,11 +211,11 @@ def _look_up(task: Task, session: Any, cache) -> tuple[list[Outcome], list[_Pend
             rollout = load_session_rollout(session, tag)
             gt = resolve_ground_truth(rollout)
             key = rollout_key(rollout, gt, task.limit_margin_deg)
-            record = cache.get(key) or {}
-            if record.get("row") is not None:
-                outcomes.append(Outcome(task.session_root, tag, row=record["row"], cached=True))
+            cached = read_entry(cache, key)
+            if cached.row is not None:
+                outcomes.append(Outcome(task.session_root, tag, row=cached.row, cached=True))
                 continue
-            todo.append(_Pending(rollout, gt, key, record))
+            todo.append(_Pending(rollout, gt, key, cached.video))
         except InspectorError as exc:
             outcomes.append(Outcome(task.session_root, tag, error_file=exc.file, error=exc.what))
     return outcomes, todo
@@ -240,7 +245,7 @@ class _Pending:
     rollout: Any
     gt: Any
     key: str
-    record: dict[str, Any]
+    video: dict[str, VideoMetrics]  # from the cache
     timeline: Any = None
 
 
@@ -269,8 +274,9 @@ def _compute_together(batch: list[_Pending], task: Task, cache) -> list[Outcome]
     timelines = build_timelines([p.rollout for p in batch], batch[0].gt, task.limit_margin_deg)
     for p, tl in zip(batch, timelines):
         p.timeline = tl
-        for data in (p.record.get("video") or {}).values():
-            tl.set_video_metrics(VideoMetrics.from_json(data))
+        for view, vm in p.video.items():
+            if view in tl.video_views():  # an entry's view the rollout lacks would show in its row
+                tl.set_video_metrics(vm)
     views = sorted({v for tl in timelines for v in tl.video_views()})
     for view in views:
         need = [tl for tl in timelines if view in tl.video_views() and view not in tl.known_video_metrics()]
@@ -284,7 +290,7 @@ def _compute_together(batch: list[_Pending], task: Task, cache) -> list[Outcome]
     for p in batch:
         video = p.timeline.known_video_metrics()
         row = rollout_summary(p.timeline, video)
-        cache.put(p.key, {"row": row, "video": {v: vm.to_json() for v, vm in video.items()}})
+        write_entry(cache, p.key, row, video)
         outcomes.append(Outcome(task.session_root, p.rollout.tag, row=row))
     return outcomes
 

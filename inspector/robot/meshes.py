@@ -10,12 +10,14 @@ them under half a millimetre). Two passes bring an arm to ~40k triangles:
 
 Results live in ``$INSPECTOR_CACHE_DIR`` or ``$XDG_CACHE_HOME/inspector/meshes`` (default
 ``~/.cache/inspector/meshes``), keyed by the source file's SHA-256 and the decimation settings, so
-a changed mesh or setting never serves a stale copy. A cache that cannot be written falls back to
-a per-user temporary directory.
+a changed mesh or setting never serves a stale copy. A cache that cannot be written (said once,
+as :func:`inspector.cache.note_unusable` says it) falls back to a per-user temporary directory, and
+where that cannot be written either, to the full mesh: a larger recording of the same arm.
 """
 
 from __future__ import annotations
 
+import errno
 import functools
 import hashlib
 import os
@@ -26,7 +28,7 @@ from typing import Any, cast
 import numpy as np
 import numpy.typing as npt
 
-from ..cache import default_dir
+from ..cache import default_dir, note_unusable
 
 CELL_M = 5e-4  # clustering grid [m]
 KEEP_FRACTION = 0.35  # of the clustered faces, kept by the quadric pass
@@ -42,11 +44,15 @@ def cache_dir() -> Path:
     try:
         path.mkdir(parents=True, exist_ok=True)
         if not os.access(path, os.W_OK):
-            raise PermissionError(path)
-    except OSError:
-        path = Path(tempfile.gettempdir()) / f"inspector-meshes-{os.getuid()}"
-        path.mkdir(parents=True, exist_ok=True)
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+    except OSError as exc:
+        note_unusable(default_dir(), exc)
+        path = _fallback_dir()
     return path
+
+
+def _fallback_dir() -> Path:
+    return Path(tempfile.gettempdir()) / f"inspector-meshes-{os.getuid()}"
 
 
 def decimated_mesh(src: str | Path, cache: Path | None = None) -> Path:
@@ -69,11 +75,18 @@ def _decimated(src: str, mtime_ns: int, size: int, cache: str) -> Path:
     """One hash per part and process (an arm uses the same servo mesh seven times)."""
     digest = hashlib.sha256(Path(src).read_bytes())
     digest.update(_SETTINGS.encode())
-    dest = Path(cache) / f"{Path(src).stem}-{digest.hexdigest()[:16]}.stl"
-    if not dest.is_file():
-        vertices, faces = decimate(*_load(Path(src)))
-        _write_stl_atomic(dest, vertices, faces)
-    return dest
+    name = f"{Path(src).stem}-{digest.hexdigest()[:16]}.stl"
+    if (Path(cache) / name).is_file():
+        return Path(cache) / name
+    vertices, faces = decimate(*_load(Path(src)))
+    for directory in dict.fromkeys((Path(cache), _fallback_dir())):
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+            _write_stl_atomic(directory / name, vertices, faces)
+            return directory / name
+        except OSError as exc:  # a full disk, a read-only one
+            note_unusable(directory, exc)
+    return Path(src)
 
 
 def decimate(vertices: npt.ArrayLike, faces: npt.ArrayLike

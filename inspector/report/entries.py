@@ -1,0 +1,57 @@
+"""What the metrics cache keeps for a rollout: its report row and its video metrics.
+
+Every reader and writer of an entry goes through here, so an entry has one shape
+(:class:`MetricsEntry`, built from the row's and the video metrics' own types) and is checked
+against it on every read: a bad entry is a miss, and what is computed instead is written over it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, TypedDict, cast
+
+from ..analysis.video_metrics import VideoMetrics, VideoMetricsRecord
+from ..cache import MetricsCache
+from .rows import RolloutRow
+
+
+class MetricsEntry(TypedDict):
+    """An entry: the row (null until ``report`` computed it) and the video metrics per view."""
+
+    row: RolloutRow | None
+    video: dict[str, VideoMetricsRecord]
+
+
+@dataclass
+class CachedMetrics:
+    """What an entry holds, ready to use (empty for a missing or bad entry).
+
+    Attributes:
+        row: the rollout's report row, or None.
+        video: video metrics per view.
+    """
+
+    row: dict[str, Any] | None = None
+    video: dict[str, VideoMetrics] = field(default_factory=dict)
+
+
+def read_entry(cache: MetricsCache, key: str) -> CachedMetrics:
+    """The entry under ``key``; empty when there is none or it is not one as written."""
+    entry = cast(MetricsEntry | None, cache.get(key, MetricsEntry))
+    if entry is None:
+        return CachedMetrics()
+    video = entry["video"]
+    for view, record in video.items():
+        ssim = record["ssim"]
+        if record["view"] != view or (ssim is not None and len(ssim) != len(record["psnr_db"])):
+            return CachedMetrics()
+    return CachedMetrics(cast(dict[str, Any] | None, entry["row"]),
+                         {view: VideoMetrics.from_json(record) for view, record in video.items()})
+
+
+def write_entry(cache: MetricsCache, key: str, row: Mapping[str, Any] | None,
+                video: Mapping[str, VideoMetrics]) -> None:
+    """Keep ``row`` (or None) and ``video`` under ``key``, replacing what was there."""
+    entry = {"row": None if row is None else dict(row), "video": {v: vm.to_json() for v, vm in video.items()}}
+    cache.put(key, entry, MetricsEntry)

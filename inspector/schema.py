@@ -1,0 +1,170 @@
+"""JSON read back checked against the type that describes it, so that what was written is the
+only thing ever read.
+
+A record's shape is written once, as a ``TypedDict`` (the writer's return type, which mypy checks
+against the code that builds it), and :func:`mismatch` checks a parsed JSON value against that very
+type at run time. What it accepts: ``TypedDict`` (exactly its keys, in their declared order: a JSON
+document's key order shows in what is printed from it), ``list[X]``, ``dict[str, X]``, ``X | None``,
+``Literal[...]``, ``str``, ``bool``, ``int`` (not a bool), ``float`` (finite, not an int: a written
+``1.0`` reads back as a float), ``Any``, and ``Annotated[X, Length(n)]`` / ``Annotated[X, Keys(names)]``
+for a list of ``n`` items and a mapping with exactly ``names`` as keys, in order.
+
+Example::
+
+    class Drift(TypedDict):
+        mean: float
+        per_joint: Annotated[list[float], Length(6)]
+
+    mismatch({"mean": 1.0, "per_joint": [0.0] * 6}, Drift)    # None: it conforms
+    mismatch({"mean": "1.0", "per_joint": []}, Drift)         # "mean: a float expected, got '1.0'"
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import types
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Annotated, Any, Literal, Union, get_args, get_origin, get_type_hints, is_typeddict
+
+
+@dataclass(frozen=True)
+class Length:
+    """``Annotated[list[X], Length(n)]``: exactly ``n`` items."""
+
+    n: int
+
+
+@dataclass(frozen=True)
+class Keys:
+    """``Annotated[dict[str, X], Keys(names)]``: exactly these keys, in this order."""
+
+    names: tuple[str, ...]
+
+    def __init__(self, names: Sequence[str]) -> None:
+        object.__setattr__(self, "names", tuple(names))
+
+
+Check = Callable[[Any, str], "str | None"]
+
+
+def mismatch(value: Any, tp: Any, where: str = "") -> str | None:
+    """Where and how ``value`` (parsed JSON) departs from ``tp``, or None when it conforms."""
+    return _checker(tp)(value, where)
+
+
+@functools.cache
+def _checker(tp: Any) -> Check:
+    """The check of ``tp``, built once per type (an entry is checked in one pass, no type lookups)."""
+    if tp is Any:
+        return lambda value, where: None
+    origin = get_origin(tp)
+    if origin is Annotated:
+        inner_type, *constraints = get_args(tp)
+        inner = _checker(inner_type)
+        return lambda value, where: inner(value, where) or _constraint_mismatch(value, constraints, where)
+    if origin in (Union, types.UnionType):
+        return _union_checker(get_args(tp))
+    if origin is Literal:
+        allowed = get_args(tp)
+        return lambda value, where: (None if type(value) in (str, int, bool) and value in allowed
+                                     else _say(where, f"one of {allowed}", value))
+    if is_typeddict(tp):
+        return _typeddict_checker(tp)
+    if origin is list:
+        return _list_checker(get_args(tp)[0])
+    if origin is dict:
+        key_type, item_type = get_args(tp)
+        assert key_type is str, "JSON keys are strings"
+        item = _checker(item_type)
+
+        def check_dict(value: Any, where: str) -> str | None:
+            if not isinstance(value, dict):
+                return _say(where, "an object", value)
+            return next((m for k, v in value.items() if (m := item(v, _join(where, k)))), None)
+        return check_dict
+    if tp is float:
+        return lambda value, where: (None if type(value) is float and math.isfinite(value)
+                                     else _say(where, "a finite float", value))
+    if tp in (int, str, bool):
+        return lambda value, where: None if type(value) is tp else _say(where, _name(tp), value)
+    if tp is None or tp is type(None):
+        return lambda value, where: None if value is None else _say(where, "null", value)
+    raise TypeError(f"mismatch() cannot check {tp!r}")
+
+
+def _union_checker(alternatives: tuple[Any, ...]) -> Check:
+    expected = " or ".join(_name(alt) for alt in alternatives)
+    checks = [_checker(alt) for alt in alternatives if alt is not type(None)]
+    nullable = type(None) in alternatives
+
+    def check_union(value: Any, where: str) -> str | None:
+        if value is None and nullable or any(c(value, where) is None for c in checks):
+            return None
+        # X | None: what is wrong inside X says more than "X or null"
+        return checks[0](value, where) if len(checks) == 1 else _say(where, expected, value)
+    return check_union
+
+
+def _list_checker(item_type: Any) -> Check:
+    item = _checker(item_type)
+    nullable_floats = item_type == float | None  # per-frame series: thousands of numbers, one pass
+
+    def check_list(value: Any, where: str) -> str | None:
+        if not isinstance(value, list):
+            return _say(where, "a list", value)
+        if item_type is float or nullable_floats:
+            if all(type(v) is float and math.isfinite(v) or nullable_floats and v is None for v in value):
+                return None
+        return next((m for i, v in enumerate(value) if (m := item(v, f"{where}[{i}]"))), None)
+    return check_list
+
+
+def _typeddict_checker(tp: Any) -> Check:
+    fields = get_type_hints(tp, include_extras=True)
+    keys = list(fields)
+    checks = [(k, _checker(field)) for k, field in fields.items()]
+
+    def check_record(value: Any, where: str) -> str | None:
+        if not isinstance(value, dict):
+            return _say(where, f"an object ({tp.__name__})", value)
+        if list(value) != keys:
+            missing = [k for k in keys if k not in value]
+            extra = [k for k in value if k not in fields]
+            what = (f"no {missing[0]!r}" if missing else f"an unknown key {extra[0]!r}" if extra
+                    else "its keys out of order")
+            return f"{where or 'the record'}: {what}"
+        return next((m for k, check in checks if (m := check(value[k], _join(where, k)))), None)
+    return check_record
+
+
+def _constraint_mismatch(value: Any, constraints: list[Any], where: str) -> str | None:
+    for c in constraints:
+        if isinstance(c, Length) and len(value) != c.n:
+            return f"{where}: {c.n} items expected, got {len(value)}"
+        if isinstance(c, Keys) and tuple(value) != c.names:
+            return f"{where}: the keys {list(c.names)} expected, got {list(value)[:8]}"
+    return None
+
+
+def _join(where: str, key: str) -> str:
+    return f"{where}.{key}" if where else key
+
+
+def _name(tp: Any) -> str:
+    if tp is type(None):
+        return "null"
+    if is_typeddict(tp):
+        return f"an object ({tp.__name__})"
+    origin = get_origin(tp)
+    if origin is Annotated:
+        return _name(get_args(tp)[0])
+    return {list: "a list", dict: "an object", float: "a finite float", int: "an integer", str: "a string",
+            bool: "a boolean"}.get(origin or tp, str(tp))
+
+
+def _say(where: str, expected: str, value: Any) -> str:
+    shown = repr(value)
+    return f"{where or 'the record'}: {expected} expected, got {shown if len(shown) <= 40 else shown[:37] + '...'}"
+
