@@ -395,7 +395,7 @@ def test_the_schema_check_says_where_a_value_departs(warm_cache: Path) -> None:
         "row.tempo: a finite float expected, got inf": {**record, "row": {**row, "tempo": float("inf")}},
         "row: an unknown key 'extra'": {**record, "row": {**row, "extra": 1}},
         "row: its keys out of order": {**record, "row": dict(reversed(row.items()))},
-        "row.kind: one of ('single_chunk', 'autoregressive', 'episode') expected, got 'x'": {
+        "row.kind: one of ('single_chunk', 'autoregressive', 'open_loop_replay', 'episode') expected, got 'x'": {
             **record, "row": {**row, "kind": "x"}},
     }
     for expected, value in cases.items():
