@@ -91,14 +91,14 @@ class Descendants:
     def record_now(self) -> None:
         for p in self._children():
             key = self._key(p)
-            if key in self.seen or key in self._ignored:
+            if key in self._ignored:
                 continue
             try:
                 cmdline = p.cmdline()
             except psutil.Error:
                 continue
-            if self._only(cmdline):
-                self.seen[key] = cmdline
+            if self._only(cmdline):  # read again each time: a process just forked shows its parent's
+                self.seen[key] = cmdline  # command line until it execs
 
     def stop_recording(self) -> None:
         self._done.set()
