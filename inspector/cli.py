@@ -18,6 +18,10 @@ What counts as bad input, per command:
 - ``eval``: exit 2 at once when the run cannot start (dataset, server, handshake, cameras, output);
   otherwise every sample that fails prints its own ``error:`` line, the others are written, and
   the exit code is 2 if any failed.
+
+Ctrl-C ends any command with exit code 130, SIGTERM (``kill``, a timeout) with 143: both stop the
+command's worker processes and remove what it was writing (``serve`` ends with 0: stopping is how
+it ends).
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ import json
 import math
 import os
 import re
+import signal
 import socket
 import sys
 import threading
@@ -39,6 +44,8 @@ from .errors import InspectorError
 from .units import DEFAULT_LIMIT_MARGIN_DEG
 
 EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 128 + signal.SIGINT
+EXIT_TERMINATED = 128 + signal.SIGTERM
 
 
 # Each command imports what it runs when it runs: `inspector info` must not pay for rerun, viser or
@@ -472,22 +479,49 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where Ctrl-C's KeyboardInterrupt would be, so that it stops a command the
+    same way: its worker pools stopped, its partial files removed (SIGTERM's default would end
+    this process alone, on the spot)."""
+
+
+def _sigterm_as_interrupt() -> Callable[[], None]:
+    """Turn SIGTERM into :class:`Terminated` while a command runs; returns what puts the previous
+    handler back. Only the main thread may set handlers: elsewhere nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def terminated(signum, frame):
+        raise Terminated
+
+    previous = signal.signal(signal.SIGTERM, terminated)
+
+    def restore() -> None:
+        signal.signal(signal.SIGTERM, previous)
+    return restore
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     func: Callable[[argparse.Namespace], int] = args.func
+    restore_sigterm = _sigterm_as_interrupt()
     try:
         return func(args)
     except InspectorError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except Terminated:
+        return EXIT_TERMINATED
     except KeyboardInterrupt:
-        return 130
+        return EXIT_INTERRUPTED
     except BrokenPipeError:  # output piped into head & co.
         sys.stderr.close()
         return 0
     except OSError as exc:  # disk full, permission denied, a file where a directory should be
         print(f"error: {InspectorError(exc.filename or '-', exc.strerror or str(exc))}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    finally:
+        restore_sigterm()
 
 
 if __name__ == "__main__":

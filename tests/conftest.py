@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import time
 from pathlib import Path
 
 import pytest
@@ -23,6 +24,57 @@ def _private_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> None:
     """The metrics and mesh caches of this test run, apart from the user's (and inherited by
     every CLI the tests start)."""
     os.environ["INSPECTOR_CACHE_DIR"] = str(tmp_path_factory.mktemp("inspector-cache"))
+
+
+# How long the processes the tests started get to end after the last test [s] (generous: a busy
+# 2-core machine; the guarantee itself is a few seconds).
+LEFTOVER_TIMEOUT_S = 60.0
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _no_process_left_behind():
+    """Every process the tests start (commands, their workers, servers, browsers) has ended once
+    the tests have: a process left running, e.g. a worker that outlived its command, fails the run,
+    listing what is left. multiprocessing's resource tracker aside: it lives as long as this
+    process does, by design.
+
+    On Linux this process adopts the orphans of the processes it starts (a child subreaper), so a
+    worker left behind by a command a test ran, whose parent has ended, is still found here
+    rather than under init. Elsewhere only this process's own descendants are checked.
+    """
+    _adopt_orphans()
+    yield
+    import psutil
+
+    def leftovers() -> dict[int, str]:
+        left = {}
+        for p in psutil.Process().children(recursive=True):
+            try:
+                if p.status() == psutil.STATUS_ZOMBIE:
+                    continue  # ended; only its exit status is left to collect
+                cmdline = " ".join(p.cmdline())
+            except psutil.Error:
+                continue  # ended meanwhile
+            if "multiprocessing.resource_tracker" not in cmdline:
+                left[p.pid] = cmdline
+        return left
+
+    deadline = time.monotonic() + LEFTOVER_TIMEOUT_S
+    while (left := leftovers()) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not left, "processes the tests left running:\n" + "\n".join(f"  {pid}: {cmd}" for pid, cmd in left.items())
+
+
+def _adopt_orphans() -> bool:
+    """Linux: become the child subreaper of every process started from here on (prctl
+    PR_SET_CHILD_SUBREAPER); False where that is not available."""
+    import ctypes
+
+    PR_SET_CHILD_SUBREAPER = 36
+    try:
+        return ctypes.CDLL(None, use_errno=True).prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) == 0
+    except (OSError, AttributeError):  # not Linux
+        return False
 
 
 @pytest.fixture(scope="session")

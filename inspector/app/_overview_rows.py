@@ -8,7 +8,8 @@ summary rows are kept (a few kB each), never timelines or frames.
 
 The cache pass runs on one daemon thread; rows are computed in one spawned worker process at a
 lower CPU priority (never under the server's GIL), so tabs load and scrub smoothly while rows are
-computed, and stopping the app never waits for it. A rollout that fails
+computed. Stopping the app ends that process at once (the task under way is dropped), and the
+process ends on its own should the app's process end without stopping it. A rollout that fails
 becomes an error row; it never stops the others.
 
 Dataset episodes (served LeRobot datasets) are not listed: their rows measure something else
@@ -18,6 +19,7 @@ Dataset episodes (served LeRobot datasets) are not listed: their rows measure so
 from __future__ import annotations
 
 import os
+import signal
 import threading
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -25,6 +27,7 @@ from typing import Any
 
 from ..cache import warn_once
 from ..jobs.pool import init_worker as _init_worker
+from ..jobs.pool import spawn_pool, stop_pool
 from ..report.tasks import Outcome, cached_outcomes, plan_tasks, run_task
 from ..units import DEFAULT_LIMIT_MARGIN_DEG
 from ._listeners import Listeners, Notifying
@@ -104,6 +107,7 @@ class OverviewRows(Notifying):
         self._listeners = Listeners()
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
+        self._pool: Any = None  # the computing worker's pool, while rows are computed
         self.done = threading.Event()
         self.n_cached = 0
         self.n_computed = 0
@@ -133,8 +137,13 @@ class OverviewRows(Notifying):
         self._thread.start()
 
     def stop(self) -> None:
-        """Stop after the task under way (its rows are dropped with the app)."""
-        self._stop.set()
+        """Stop computing; returns once the worker process has ended (the task under way is
+        dropped with its rows: the app is going)."""
+        with self._lock:
+            self._stop.set()
+            pool, self._pool = self._pool, None
+        if pool is not None:
+            stop_pool(pool, grace_s=0)  # no grace: a killed cache write never leaves an entry
 
     def _run(self) -> None:
 
@@ -153,13 +162,22 @@ class OverviewRows(Notifying):
             if to_compute:
                 # In a worker process: computing in this one would hold the GIL against the
                 # threads that serve the tabs (pages took minutes to load on two busy cores).
-                with _background_pool() as pool:
+                with self._lock:
+                    if self._stop.is_set():
+                        return
+                    self._pool = pool = spawn_pool(1, _init_background_worker)
+                try:
                     for task in to_compute:
-                        if self._stop.is_set():
-                            pool.shutdown(wait=False, cancel_futures=True)
+                        outcomes = _guarded(task, lambda t: pool.submit(run_task, t).result())
+                        if self._stop.is_set():  # stopped meanwhile: its worker was killed
                             return
-                        self._publish(_guarded(task, lambda t: pool.submit(run_task, t).result()))
+                        self._publish(outcomes)
                         self._notify()
+                finally:
+                    with self._lock:
+                        mine, self._pool = self._pool, None
+                    if mine is not None:
+                        mine.shutdown(wait=True)
         finally:
             self.done.set()
             self._notify()
@@ -193,22 +211,15 @@ def _guarded(task, fn, with_missing: bool = False):
         return (failed, ()) if with_missing else failed
 
 
-def _background_pool():
-    """One spawned worker process at a lower CPU priority, set up as a report worker."""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
-    return ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_init_background_worker)
-
-
 def _init_background_worker() -> None:
-
+    """The computing worker: a report worker at a lower CPU priority, which Ctrl-C leaves alone
+    (the app stops it; at a terminal, Ctrl-C reaches every process of the group)."""
     try:
         os.nice(BACKGROUND_NICENESS)
     except (AttributeError, OSError):
         pass
     _init_worker()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _lower_priority() -> None:

@@ -3,20 +3,100 @@ overview): a spawned pool that stops promptly on Ctrl-C, and the per-worker set-
 
 Jobs are plain picklable callables and arguments, so the same job runs in this process, in a
 :func:`local_pool`, or as a Ray task (:mod:`inspector.jobs.ray`).
+
+No worker outlives the command that started it. A pool's owner stops it with :func:`stop_pool`
+(jobs under way interrupted, workers still running after a grace period killed, and every worker
+ended before it returns). A worker also watches its parent: should the parent end without
+stopping its pool (``kill -9``, ``os._exit``, a crash), the worker stops its job as on Ctrl-C and
+exits within seconds, instead of waiting forever for jobs no one will send (its queues' pipes
+stay open in the worker itself, so it never sees them close).
 """
 
 from __future__ import annotations
 
+import _thread
 import multiprocessing
 import os
 import signal
 import sys
+import threading
+import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
+from multiprocessing.connection import wait as wait_for_sentinels
 from typing import Any, TypeVar
 
 R = TypeVar("R")
+
+# How long a stopped pool's workers get to end the jobs under way, once interrupted, before they
+# are killed: an interrupted export removes the file it was writing [s].
+STOP_GRACE_S = 5.0
+# How long killed workers get to be gone before stop_pool returns anyway [s].
+KILL_WAIT_S = 10.0
+# How often a worker checks that its parent is alive when the parent's pipe cannot tell (the
+# parent was replaced: another process inherited that pipe, or a subreaper adopted this one) [s].
+PARENT_CHECK_S = 1.0
+# The exit status of a worker that ended because its parent had gone.
+PARENT_GONE_EXIT = 3
+
+
+def spawn_pool(workers: int, initializer: Callable[..., None] | None = None,
+               initargs: tuple = ()) -> ProcessPoolExecutor:
+    """A pool of ``workers`` spawned processes (a clean interpreter each: no inherited locks),
+    each ending on its own when this process ends (see the module docstring); ``initializer``
+    then runs in each worker as ProcessPoolExecutor's would. Stop it with :func:`stop_pool` or
+    ``shutdown()``."""
+    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_init_spawned_worker, initargs=(initializer, initargs))
+
+
+def stop_pool(pool: ProcessPoolExecutor, grace_s: float = STOP_GRACE_S) -> None:
+    """Stop ``pool`` now and return once its workers have ended: jobs not started are cancelled,
+    jobs under way are interrupted (SIGINT: an :func:`interruptible` job stops as on Ctrl-C,
+    cleaning up after itself), and a worker still running ``grace_s`` later is killed.
+
+    A worker that is not running a job ignores SIGINT and ends when the pool tells it to.
+    """
+    # The pool forgets its processes on shutdown: take them first (a copy, as the pool's
+    # manager thread changes the mapping).
+    processes = list(dict(getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    if grace_s > 0:
+        for process in processes:
+            with suppress(ProcessLookupError, ValueError, AttributeError):  # already ended, or closed
+                if process.exitcode is None:
+                    os.kill(process.pid, signal.SIGINT)
+    running = _wait_until_ended(processes, grace_s)
+    for process in running:
+        with suppress(ProcessLookupError, ValueError, AttributeError):
+            process.kill()
+    _wait_until_ended(running, KILL_WAIT_S)
+
+
+def _wait_until_ended(processes: list, timeout: float) -> list:
+    """Wait up to ``timeout`` seconds until every process has ended; returns those still running."""
+    deadline = time.monotonic() + timeout
+    running = list(processes)
+    while running:
+        try:
+            sentinels = {p.sentinel: p for p in running}
+        except ValueError:  # a process object already closed: it had ended
+            running = [p for p in running if _sentinel_or_none(p) is not None]
+            continue
+        left = deadline - time.monotonic()
+        if left <= 0:
+            break
+        ended = wait_for_sentinels(list(sentinels), left)
+        running = [p for s, p in sentinels.items() if s not in ended]
+    return running
+
+
+def _sentinel_or_none(process) -> int | None:
+    try:
+        return process.sentinel
+    except ValueError:
+        return None
 
 
 @contextmanager
@@ -25,23 +105,32 @@ def local_pool(workers: int) -> Iterator[Any]:
 
     Ctrl-C reaches every process of the terminal's group. The driver handles it: no job starts
     after it (not even one already queued to a worker), the jobs under way are stopped by it, and
-    the pool is shut down. Between jobs a worker ignores it; it would otherwise die printing a
-    traceback.
+    the pool is stopped (:func:`stop_pool`), so no worker is left once the command ends. An
+    interrupt of the driver alone (``kill -INT``, or SIGTERM, which the command line turns into
+    one) interrupts the workers' jobs too. Between jobs a worker ignores SIGINT; it would
+    otherwise die printing a traceback.
     """
-    context = multiprocessing.get_context("spawn")  # a clean interpreter per worker (no inherited locks)
+    context = multiprocessing.get_context("spawn")
     stop = context.Event()
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_local_worker,
-                               initargs=(stop,))
+    pool = spawn_pool(workers, _init_local_worker, (stop,))
     try:
         yield pool
-    except BaseException:
+    except BaseException:  # Ctrl-C, SIGTERM, an error, or the caller closing its generator early
         stop.set()
+        stop_pool(pool)
         raise
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 _STOP: Any = None  # a local pool's stop event, in its workers
+_IDLE = threading.Event()  # in a worker: no interruptible job is under way
+_IDLE.set()
+
+
+def _init_spawned_worker(initializer: Callable[..., None] | None, initargs: tuple) -> None:
+    _exit_with_parent()
+    if initializer is not None:
+        initializer(*initargs)
 
 
 def _init_local_worker(stop: Any) -> None:
@@ -56,11 +145,41 @@ def interruptible(fn: Callable[[Any], R], job: Any) -> R:
     hands back to the driver, which is stopping too); not started once the driver stops."""
     if _STOP is not None and _STOP.is_set():
         raise KeyboardInterrupt
+    _IDLE.clear()
     signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         return fn(job)
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        _IDLE.set()
+
+
+def _exit_with_parent() -> None:
+    """In a spawned worker: end this process soon after its parent is gone.
+
+    A thread waits on the parent's pipe, which the kernel closes when the parent ends however it
+    ends (a portable parent-death signal), checking every :data:`PARENT_CHECK_S` that the parent
+    is still this process's parent. Then the job under way is interrupted as by Ctrl-C (an
+    :func:`interruptible` job cleans up after itself) and the process exits, at the latest
+    :data:`STOP_GRACE_S` later.
+    """
+    parent = multiprocessing.parent_process()
+    if parent is None:  # not started by multiprocessing
+        return
+
+    def parent_alive() -> bool:
+        return os.getppid() == parent.pid and parent.is_alive()
+
+    def watch() -> None:
+        while parent_alive():
+            parent.join(PARENT_CHECK_S)  # returns at once when the parent's pipe closes
+        _thread.interrupt_main(signal.SIGINT)  # does nothing while SIGINT is ignored (no job)
+        _IDLE.wait(STOP_GRACE_S)
+        os._exit(PARENT_GONE_EXIT)
+
+    if not parent_alive():  # gone already, while this process was starting
+        os._exit(PARENT_GONE_EXIT)
+    threading.Thread(target=watch, name="inspector-parent-watch", daemon=True).start()
 
 
 def init_worker() -> None:
