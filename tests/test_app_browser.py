@@ -489,3 +489,90 @@ def test_notes_fields_are_labelled_for_assistive_tech(browser, app):
                what="the chunk note's label to find its field again")
     assert page.get_by_label("Rollout note", exact=True).count() == 1
     page.close()
+
+
+# In one look: the step the readout over the arms says and the step the playing clip shows (its
+# currentTime on the clip's own clock), and what the page's last 3D frames took.
+ARM_AND_VIDEO_STEP = """() => {
+    const r = document.querySelector('.inspector-readout'), g = document.querySelector('.inspector-video');
+    const m = r && r.textContent.match(/step (\\d+)/);
+    const v = g && g.querySelector("video.inspector-frame[data-kind='imagined']");
+    const playing = !!(v && !v.paused && v.currentTime > 0 && g.dataset.clipFps);
+    return {arm: m ? +m[1] : null, images: !v, grid: g ? +g.dataset.step : null,
+            video: playing ? +g.dataset.clipFirst + v.currentTime * +g.dataset.clipFps : null}; }"""
+# ms between the page's animation frames (a frame of the 3D view each, while the arms move)
+FRAME_TIMES = """() => { window.__frames = []; let p = performance.now();
+    const f = (n) => { window.__frames.push(n - p); p = n; requestAnimationFrame(f); }; requestAnimationFrame(f); }"""
+# ms from the user's press (the event's own time stamp, taken as the input arrived) to the first
+# animation frame showing images again whose step the readout says too
+PAUSE_ANSWER = """() => { window.__answer = null; window.__pressed = null;
+    document.addEventListener('pointerdown', (e) => { window.__pressed = e.timeStamp; window.__answer = null; }, true);
+    const tick = () => {
+      if (window.__pressed !== null && window.__answer === null) {
+        const r = document.querySelector('.inspector-readout'), g = document.querySelector('.inspector-video');
+        const m = r && r.textContent.match(/step (\\d+)/);
+        if (g && !g.querySelector('video') && m && +m[1] === +g.dataset.step)
+          window.__answer = {ms: performance.now() - window.__pressed, step: +m[1]};
+      }
+      requestAnimationFrame(tick); }; tick(); }"""
+
+
+def test_arms_readout_and_video_play_on_one_clock(browser):
+    """The demo at 1x with its clip playing: the step over the arms is the step of the video beside
+    them (median gap at most 3 steps), from the clip's first frame to the end; Pause is answered
+    within 1 s, the arms and the images on the step the clip had reached.
+
+    The arms move only when the page draws a 3D frame (in software WebGL here, 0.1-0.3 s on a
+    quiet machine, more on a loaded one), so between frames the readout stands while the video
+    moves on: the bounds take the larger of the spec and what the page's own frame rate allows
+    (half a frame's steps for the gap, two frames for Pause). The server's own clock, the clock
+    before, ran 20-55 steps ahead for the whole playback."""
+    import statistics
+
+    from inspector.data.sources import BUNDLED_DEMO
+
+    demo = serve([BUNDLED_DEMO], port=0, block=False)
+    try:
+        page, tab = new_page(browser, demo)
+        open_in_page(page, tab, demo, "prompt_train")
+        fps = tab.loaded.timeline.fps
+        wait_until(lambda: tab.controls.light_3d.value is True, what="the page to tick Light 3D")
+        tab.play()  # encode the clips once: the measured Play finds them cached
+        wait_until(lambda: tab._clip is not None, timeout=180, what="the playback clips")
+        tab.pause()
+        tab.set_step(0)
+        wait_until(lambda: page.evaluate(ARM_AND_VIDEO_STEP)["images"], timeout=60, what="the images back")
+
+        page.get_by_role("button", name="Play").click()
+        wait_until(lambda: tab.playing, what="playback to start")
+        page.evaluate(FRAME_TIMES)
+        looks = []
+        while tab.playing:  # to the rollout's end
+            looks.append(page.evaluate(ARM_AND_VIDEO_STEP))
+            time.sleep(0.05)
+        gaps = [abs(look["arm"] - look["video"]) for look in looks if look["video"] is not None and look["arm"] is not None]
+        frame_s = statistics.median(page.evaluate("() => window.__frames")) / 1e3
+        assert len(gaps) >= 10, f"the clip played in only {len(gaps)} of {len(looks)} looks"
+        gap_bound = max(3.0, frame_s * fps / 2)
+        assert statistics.median(gaps) <= gap_bound, (
+            f"median gap {statistics.median(gaps):.1f} steps (bound {gap_bound:.1f}; a 3D frame every "
+            f"{frame_s * 1e3:.0f} ms); gaps: {[round(g) for g in gaps]}")
+
+        page.evaluate(PAUSE_ANSWER)
+        page.get_by_role("button", name="Play").click()  # from the end: from the start again
+        pause = page.get_by_role("button", name="Pause")
+        box = pause.bounding_box()
+        wait_until(lambda: (page.evaluate(ARM_AND_VIDEO_STEP)["video"] or 0) > 2 * fps, timeout=60, interval=0.05,
+                   what="the clip to play for 2 s")
+        at_press = page.evaluate(ARM_AND_VIDEO_STEP)["video"]
+        page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)  # as a user clicks
+        answer = wait_until(lambda: page.evaluate("() => window.__answer"), timeout=60, interval=0.05,
+                            what="Pause to bring back the images and the readout of one step")
+        pause_bound = max(1.0, 2 * frame_s)
+        assert answer["ms"] / 1e3 <= pause_bound, f"Pause answered after {answer['ms']:.0f} ms (bound {pause_bound:.2f} s)"
+        assert not tab.playing and tab.step == answer["step"]
+        # it stopped where the clip was, give or take what the clip played while the press travelled
+        assert at_press - 3 <= answer["step"] <= at_press + fps * answer["ms"] / 1e3 + 3, (at_press, answer)
+        page.close()
+    finally:
+        demo.stop()
