@@ -105,3 +105,29 @@ def canvas_is_drawn(png: bytes, box: tuple[int, int, int, int]) -> bool:
 
     img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))[box[1]:box[3], box[0]:box[2]]
     return bool(img.reshape(-1, 3).std(axis=0).max() > 8.0)
+
+
+# In one look: the step the readout over the arms says and the step the playing clip shows (its
+# currentTime on the clip's own clock), and what the page's last 3D frames took.
+ARM_AND_VIDEO_STEP = """() => {
+    const r = document.querySelector('.inspector-readout'), g = document.querySelector('.inspector-video');
+    const m = r && r.textContent.match(/step (\\d+)/);
+    const v = g && g.querySelector("video.inspector-frame[data-kind='imagined']");
+    const playing = !!(v && !v.paused && v.currentTime > 0 && g.dataset.clipFps);
+    return {arm: m ? +m[1] : null, images: !v, grid: g ? +g.dataset.step : null,
+            video: playing ? +g.dataset.clipFirst + v.currentTime * +g.dataset.clipFps : null}; }"""
+# ms between the page's animation frames (a frame of the 3D view each, while the arms move)
+FRAME_TIMES = """() => { window.__frames = []; let p = performance.now();
+    const f = (n) => { window.__frames.push(n - p); p = n; requestAnimationFrame(f); }; requestAnimationFrame(f); }"""
+# ms from the user's press (the event's own time stamp, taken as the input arrived) to the first
+# animation frame showing images again whose step the readout says too
+PAUSE_ANSWER = """() => { window.__answer = null; window.__pressed = null;
+    document.addEventListener('pointerdown', (e) => { window.__pressed = e.timeStamp; window.__answer = null; }, true);
+    const tick = () => {
+      if (window.__pressed !== null && window.__answer === null) {
+        const r = document.querySelector('.inspector-readout'), g = document.querySelector('.inspector-video');
+        const m = r && r.textContent.match(/step (\\d+)/);
+        if (g && !g.querySelector('video') && m && +m[1] === +g.dataset.step)
+          window.__answer = {ms: performance.now() - window.__pressed, step: +m[1]};
+      }
+      requestAnimationFrame(tick); }; tick(); }"""

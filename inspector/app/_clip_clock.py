@@ -20,26 +20,27 @@ from __future__ import annotations
 
 import json
 import math
+import statistics
 import time
+from collections import deque
 from dataclasses import dataclass
 
 from ._page_script import page_script_html
 
 CLIP_CLOCK_LABEL = "Clip clock"
-# The page stops reporting when its clip stalls or its main thread stalls: past this, the server
-# stops waiting for it (and past it with no first report, it never started) and keeps its own clock.
+# A page that has not said its new clip plays after this long never will (autoplay refused, say),
+# and one silent this long is gone: the server's own clock runs on from where playback is.
 SILENT_AFTER_S = 4.0
-# A report is extrapolated at the clip's rate at most this far; beyond, the step holds (a page
-# that paints in software can be busy for about a second between two reports).
-EXTRAPOLATE_S = 1.5
 # A step behind the one shown by more than this is taken (the page's clip restarted, or the server
 # ran on its own clock meanwhile); a smaller one is jitter in the reports, and the arms never step back.
 BACK_STEPS = 5
 # The page shows a step some time after the server sends it (a 3D frame in software WebGL takes
-# 0.1-0.5 s, and the readout and arms land together after one): the server sends the step the clip
-# will be at by then. The page reports the step it shows beside the clip's, and the lead moves by
-# this part of their gap per report, up to MAX_LEAD_S (with a GPU it stays near 0).
-LEAD_GAIN = 0.2
+# 0.1-0.5 s, more on a loaded machine, and the readout and arms land together after one): the
+# server sends the step the clip will be at by then. The page reports the step its readout shows;
+# how long ago the server sent that step is the lag, and the lead is the median of the last
+# LAG_REPORTS lags (measured, not corrected in a loop: a lead never changes the lag it is measured
+# by), at most MAX_LEAD_S. With a GPU it stays near the websocket's few ms.
+LAG_REPORTS = 15
 MAX_LEAD_S = 1.5
 # Off: the server's clock only, as before (the benchmark's baseline).
 ENABLED = True
@@ -143,7 +144,9 @@ class ClipClock:
         self._fps = 0.0
         self._shown_at = 0.0
         self._last: ClipTime | None = None
-        self.lead_s = 0.0  # how far ahead of the clip the server sends the step (see LEAD_GAIN)
+        self.lead_s = 0.0  # how far ahead of the clip the server sends the step (see LAG_REPORTS)
+        self._sent: dict[int, float] = {}  # step -> when the play loop sent it, for this clip
+        self._lags: deque[float] = deque(maxlen=LAG_REPORTS)  # the page's lag outlives a clip
 
     def shown(self, clip: int, start: int, end: int, fps: float, step: int, now: float | None = None) -> None:
         """Clip ``clip`` (steps ``start``..``end`` - 1 at ``fps`` frames/s) went to the page,
@@ -151,6 +154,12 @@ class ClipClock:
         self._clip, self._start, self._end, self._fps, self._held = clip, start, end, fps, step
         self._shown_at = time.monotonic() if now is None else now
         self._last = None
+        self._sent = {}
+
+    def sent(self, step: int, now: float) -> None:
+        """The play loop sent ``step`` to the page at ``now`` (``time.monotonic()``)."""
+        if self._clip is not None:
+            self._sent[step] = now
 
     def stop(self) -> None:
         """No clip plays (paused, images back)."""
@@ -166,9 +175,10 @@ class ClipClock:
             return False
         assert isinstance(got, ClipTime)
         self._last = got
-        if got.playing and got.shown is not None and self._start <= got.shown < self._end:
-            behind_s = (self._start + got.t_s * self._fps - got.shown) / self._fps
-            self.lead_s = min(max(self.lead_s + LEAD_GAIN * behind_s, 0.0), MAX_LEAD_S)
+        sent = self._sent.get(got.shown) if got.playing and got.shown is not None else None
+        if sent is not None:
+            self._lags.append(got.received - sent)
+            self.lead_s = min(max(statistics.median(self._lags), 0.0), MAX_LEAD_S)
         return True
 
     def step(self, now: float | None = None, lead: bool = True) -> int | None:
@@ -185,7 +195,9 @@ class ClipClock:
             return None
         if last.ended:
             return self._end
-        ahead = min(now - last.received, EXTRAPOLATE_S) + (self.lead_s if lead else 0.0) if last.playing else 0.0
+        # A playing clip plays on while the page is too busy to say so (its video is decoded and
+        # presented off the page's main thread): ahead at the clip's rate since the last report.
+        ahead = now - last.received + (self.lead_s if lead else 0.0) if last.playing else 0.0
         step = self._start + math.floor((last.t_s + ahead) * self._fps + 1e-3)
         return max(self._start, min(step, self._end))
 

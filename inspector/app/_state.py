@@ -489,7 +489,7 @@ class TabState:
                 # Plot cursors at PLOT_CURSOR_HZ: the arms and video move at the full rate.
                 cursor = at_end or now - last_cursor >= 1.0 / PLOT_CURSOR_HZ
                 last_cursor = now if cursor else last_cursor
-                self.set_step(target, cursor=cursor)
+                self.clip_clock.sent(self.set_step(target, cursor=cursor), now)
                 if at_end:
                     self.pause(at_end=True)
                     return
