@@ -131,3 +131,43 @@ PAUSE_ANSWER = """() => { window.__answer = null; window.__pressed = null;
           window.__answer = {ms: performance.now() - window.__pressed, step: +m[1]};
       }
       requestAnimationFrame(tick); }; tick(); }"""
+
+
+def play_on_one_clock(page, tab, presses: int = 1) -> dict:
+    """Measure a page's playback clock (the app's tab ``tab`` at step 0 with the rollout open, its
+    clips cached): Play pressed in the page and played to the end, looking at the readout's and
+    the clip's steps together every ~50 ms; then ``presses`` times, Play from the start and Pause
+    pressed (as a user clicks: at the button's place) once the clip has played 2 s.
+
+    Returns ``{"gaps": |readout step - clip step| per look with the clip playing, "frame_s": the
+    median time between the page's animation frames during playback [s], "pauses": [{"s": press
+    to answered [s], "step": where it stopped, "clip_step": the clip's step at the press}]}``.
+    """
+    import statistics
+
+    fps = tab.loaded.timeline.fps
+    page.get_by_role("button", name="Play").click()
+    wait_until(lambda: tab.playing, what="playback to start")
+    page.evaluate(FRAME_TIMES)
+    looks = []
+    while tab.playing:  # to the rollout's end
+        looks.append(page.evaluate(ARM_AND_VIDEO_STEP))
+        time.sleep(0.05)
+    gaps = [abs(look["arm"] - look["video"]) for look in looks if look["video"] is not None and look["arm"] is not None]
+    frame_s = statistics.median(page.evaluate("() => window.__frames.splice(0)")) / 1e3
+    page.evaluate(PAUSE_ANSWER)
+    pauses = []
+    for _ in range(presses):
+        tab.set_step(0)
+        wait_until(lambda: page.evaluate(ARM_AND_VIDEO_STEP)["grid"] == 0, what="the first step's images")
+        page.get_by_role("button", name="Play").click()
+        box = page.get_by_role("button", name="Pause").bounding_box()
+        wait_until(lambda: (page.evaluate(ARM_AND_VIDEO_STEP)["video"] or 0) > 2 * fps, timeout=60, interval=0.05,
+                   what="the clip to play for 2 s")
+        clip_step = page.evaluate(ARM_AND_VIDEO_STEP)["video"]
+        page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+        answer = wait_until(lambda: page.evaluate("() => window.__answer"), timeout=60, interval=0.05,
+                            what="Pause to bring back the images and the readout of one step")
+        wait_until(lambda: not tab.playing, what="the tab to pause")
+        pauses.append({"s": answer["ms"] / 1e3, "step": answer["step"], "clip_step": clip_step, "tab_step": tab.step})
+    return {"gaps": gaps, "frame_s": frame_s, "pauses": pauses}

@@ -15,8 +15,6 @@ from pathlib import Path
 import pytest
 from browser import (
     ARM_AND_VIDEO_STEP,
-    FRAME_TIMES,
-    PAUSE_ANSWER,
     canvas_is_drawn,
     frame_sources,
     hide_software_webgl_notice,
@@ -24,6 +22,7 @@ from browser import (
     open_app,
     open_page,
     page_client_id,
+    play_on_one_clock,
     select_option,
     skip_reason,
     slider_thumb,
@@ -520,36 +519,18 @@ def test_arms_readout_and_video_play_on_one_clock(browser):
         tab.set_step(0)
         wait_until(lambda: page.evaluate(ARM_AND_VIDEO_STEP)["images"], timeout=60, what="the images back")
 
-        page.get_by_role("button", name="Play").click()
-        wait_until(lambda: tab.playing, what="playback to start")
-        page.evaluate(FRAME_TIMES)
-        looks = []
-        while tab.playing:  # to the rollout's end
-            looks.append(page.evaluate(ARM_AND_VIDEO_STEP))
-            time.sleep(0.05)
-        gaps = [abs(look["arm"] - look["video"]) for look in looks if look["video"] is not None and look["arm"] is not None]
-        frame_s = statistics.median(page.evaluate("() => window.__frames")) / 1e3
-        assert len(gaps) >= 10, f"the clip played in only {len(gaps)} of {len(looks)} looks"
+        measured = play_on_one_clock(page, tab)
+        gaps, frame_s, (pause,) = measured["gaps"], measured["frame_s"], measured["pauses"]
+        assert len(gaps) >= 10, f"the clip played in only {len(gaps)} looks"
         gap_bound = max(3.0, frame_s * fps / 2)
         assert statistics.median(gaps) <= gap_bound, (
             f"median gap {statistics.median(gaps):.1f} steps (bound {gap_bound:.1f}; a 3D frame every "
             f"{frame_s * 1e3:.0f} ms); gaps: {[round(g) for g in gaps]}")
-
-        page.evaluate(PAUSE_ANSWER)
-        page.get_by_role("button", name="Play").click()  # from the end: from the start again
-        pause = page.get_by_role("button", name="Pause")
-        box = pause.bounding_box()
-        wait_until(lambda: (page.evaluate(ARM_AND_VIDEO_STEP)["video"] or 0) > 2 * fps, timeout=60, interval=0.05,
-                   what="the clip to play for 2 s")
-        at_press = page.evaluate(ARM_AND_VIDEO_STEP)["video"]
-        page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)  # as a user clicks
-        answer = wait_until(lambda: page.evaluate("() => window.__answer"), timeout=60, interval=0.05,
-                            what="Pause to bring back the images and the readout of one step")
         pause_bound = max(1.0, 2 * frame_s)
-        assert answer["ms"] / 1e3 <= pause_bound, f"Pause answered after {answer['ms']:.0f} ms (bound {pause_bound:.2f} s)"
-        assert not tab.playing and tab.step == answer["step"]
+        assert pause["s"] <= pause_bound, f"Pause answered after {pause['s']:.2f} s (bound {pause_bound:.2f} s)"
+        assert pause["tab_step"] == pause["step"]  # the arms are where the images are
         # it stopped where the clip was, give or take what the clip played while the press travelled
-        assert at_press - 3 <= answer["step"] <= at_press + fps * answer["ms"] / 1e3 + 3, (at_press, answer)
+        assert pause["clip_step"] - 3 <= pause["step"] <= pause["clip_step"] + fps * pause["s"] + 3, pause
         page.close()
     finally:
         demo.stop()
