@@ -40,7 +40,7 @@ BACK_STEPS = 5
 # how long ago the server sent that step is the lag, and the lead is the median of the last
 # LAG_REPORTS lags (measured, not corrected in a loop: a lead never changes the lag it is measured
 # by), at most MAX_LEAD_S. With a GPU it stays near the websocket's few ms.
-LAG_REPORTS = 15
+LAG_REPORTS = 8
 MAX_LEAD_S = 1.5
 # Off: the server's clock only, as before (the benchmark's baseline).
 ENABLED = True
