@@ -46,8 +46,8 @@ MAX_LEAD_S = 3.0
 ENABLED = True
 
 # The page's side. Reports are JSON: {"clip": id, "t": currentTime [s], "playing": bool,
-# "ended": bool, "shown": the readout's step, "n": a counter (a value that changes is sent)}; {"clip": null} once per connection
-# says the page keeps this clock.
+# "ended": bool, "shown": the readout's step, "n": a counter (a value that changes is sent)};
+# {"clip": null} once per connection says the page keeps this clock.
 _CLIP_CLOCK_JS = r"""
 const LABEL = __LABEL__;
 const setValue = Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, 'value').set;
