@@ -532,7 +532,8 @@ def test_arms_readout_and_video_play_on_one_clock(browser):
         assert pause["s"] <= pause_bound, f"Pause answered after {pause['s']:.2f} s (bound {pause_bound:.2f} s)"
         assert pause["tab_step"] == pause["step"]  # the arms are where the images are
         # it stopped where the clip was, give or take what the clip played while the press travelled
-        assert pause["clip_step"] - 3 <= pause["step"] <= pause["clip_step"] + fps * pause["s"] + 3, pause
+        # (a page too busy to pass the press on is as late with its last report of the clip)
+        assert abs(pause["step"] - pause["clip_step"]) <= fps * pause["s"] + 3, pause
         page.close()
     finally:
         demo.stop()
