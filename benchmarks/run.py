@@ -585,6 +585,62 @@ def bench_playback(tmp: Path, quick: bool) -> list[Figure]:
                    "playing meanwhile; baseline: a second Play (clips cached)")]
 
 
+def bench_clock(tmp: Path, quick: bool) -> list[Figure]:
+    """The arms and the video on one clock, in headless Chromium (1600x1000, WebGL in software,
+    Light 3D ticked by the page) on the demo's ``prompt_train`` at 1x, its clips cached: the median
+    gap between the step the readout over the arms says and the step the playing clip shows, over
+    the whole playback; and Pause, pressed as a user presses 2 s into the clip: the time to the
+    images and readout of one step. Beside the same with the server's own clock (before)."""
+    sys.path.insert(0, str(REPO / "tests"))
+    from browser import ARM_AND_VIDEO_STEP, launch, play_on_one_clock, skip_reason, wait_until
+
+    if (reason := skip_reason()) is not None:
+        print(f"  clock: skipped ({reason})", file=sys.stderr)
+        return []
+    from playwright.sync_api import sync_playwright
+
+    from inspector.app import _clip_clock, serve
+
+    presses = 2 if quick else 3
+    measured = {}
+    app = serve([DEMO], port=0, block=False)
+    try:
+        with sync_playwright() as pw:
+            browser = launch(pw)
+            for follow in (True, False):
+                _clip_clock.ENABLED = follow
+                page, tab = _demo_page(browser, app)
+                tab.play()  # encode (or find) the clips: the measured Play starts them at once
+                wait_until(lambda: tab._clip is not None, timeout=180, what="the playback clips")
+                tab.pause()
+                tab.set_step(0)
+                wait_until(lambda: page.evaluate(ARM_AND_VIDEO_STEP)["images"], timeout=60, what="the images back")
+                measured[follow] = play_on_one_clock(page, tab, presses)
+                page.close()
+            browser.close()
+    finally:
+        _clip_clock.ENABLED = True
+        app.stop()
+
+    def summary(m: dict) -> tuple[float, float, float, float]:
+        """median gap [steps], median Pause answer [s], its worst, median |stop - clip| [steps]"""
+        answers = [p["s"] for p in m["pauses"]]
+        stops = [abs(p["step"] - p["clip_step"]) for p in m["pauses"]]
+        return (statistics.median(m["gaps"]), statistics.median(answers), max(answers), statistics.median(stops))
+
+    (gap, answer, worst, stop), (gap_0, answer_0, worst_0, stop_0) = summary(measured[True]), summary(measured[False])
+    frames = (f"the page's 3D frames {measured[True]['frame_s'] * 1e3:.0f} ms long "
+              f"({measured[False]['frame_s'] * 1e3:.0f} ms before; median by time spent in them)")
+    return [Figure("clock_gap", gap, "steps", "median <= 3 steps", gap <= 3, baseline=gap_0,
+                   note=f"headless Chromium, 1600x1000, demo prompt_train at 1x, clips cached; |readout step - "
+                        f"clip step| over {len(measured[True]['gaps'])} looks while the clip played; {frames}; "
+                        "baseline: the server's own clock"),
+            Figure("pause_answer", answer, "s", "< 1 s", worst < 1, baseline=answer_0,
+                   note=f"median of {presses} presses of Pause (worst {worst:.2f} s, before {worst_0:.2f} s) to "
+                        f"the images and readout of one step; stopped {stop:.0f} steps from the clip's step at the "
+                        f"press ({stop_0:.0f} before); baseline: the server's own clock")]
+
+
 def _demo_page(browser, app, hide_canvas: bool = False):
     """A 1600x1000 page of ``app`` showing the demo's ``prompt_train``, its frames all ready:
     (page, its tab)."""
@@ -770,7 +826,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="smaller counts, fewer repetitions")
     parser.add_argument("--json", type=Path, help="also write the figures as JSON")
-    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback keys groot eval")
+    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback keys groot eval clock")
     args = parser.parse_args(argv)
 
     figures: list[Figure] = []
@@ -789,6 +845,7 @@ def main(argv: list[str] | None = None) -> int:
             ("keys", lambda: bench_keys(tmp, args.quick)),
             ("groot", lambda: bench_groot(tmp, args.quick)),
             ("eval", lambda: bench_eval(tmp, args.quick)),
+            ("clock", lambda: bench_clock(tmp, args.quick)),
         ]
         for name, run in runs:
             if args.only and name not in args.only:

@@ -105,3 +105,81 @@ def canvas_is_drawn(png: bytes, box: tuple[int, int, int, int]) -> bool:
 
     img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))[box[1]:box[3], box[0]:box[2]]
     return bool(img.reshape(-1, 3).std(axis=0).max() > 8.0)
+
+
+# In one look: the step the readout over the arms says and the step the playing clip shows (its
+# currentTime on the clip's own clock), and what the page's last 3D frames took.
+ARM_AND_VIDEO_STEP = """() => {
+    const r = document.querySelector('.inspector-readout'), g = document.querySelector('.inspector-video');
+    const m = r && r.textContent.match(/step (\\d+)/);
+    const v = g && g.querySelector("video.inspector-frame[data-kind='imagined']");
+    const playing = !!(v && !v.paused && v.currentTime > 0 && g.dataset.clipFps);
+    return {arm: m ? +m[1] : null, images: !v, grid: g ? +g.dataset.step : null,
+            video: playing ? +g.dataset.clipFirst + v.currentTime * +g.dataset.clipFps : null}; }"""
+# ms between the page's animation frames (a frame of the 3D view each, while the arms move)
+FRAME_TIMES = """() => { window.__frames = []; let p = performance.now();
+    const f = (n) => { window.__frames.push(n - p); p = n; requestAnimationFrame(f); }; requestAnimationFrame(f); }"""
+# ms from the user's press (the event's own time stamp, taken as the input arrived) to the first
+# animation frame showing images again whose step the readout says too
+PAUSE_ANSWER = """() => { window.__answer = null; window.__pressed = null;
+    document.addEventListener('pointerdown', (e) => { window.__pressed = e.timeStamp; window.__answer = null; }, true);
+    const tick = () => {
+      if (window.__pressed !== null && window.__answer === null) {
+        const r = document.querySelector('.inspector-readout'), g = document.querySelector('.inspector-video');
+        const m = r && r.textContent.match(/step (\\d+)/);
+        if (g && !g.querySelector('video') && m && +m[1] === +g.dataset.step)
+          window.__answer = {ms: performance.now() - window.__pressed, step: +m[1]};
+      }
+      requestAnimationFrame(tick); }; tick(); }"""
+
+
+def play_on_one_clock(page, tab, presses: int = 1) -> dict:
+    """Measure a page's playback clock (the app's tab ``tab`` at step 0 with the rollout open, its
+    clips cached): Play pressed in the page and played to the end, looking at the readout's and
+    the clip's steps together every ~50 ms; then ``presses`` times, Play from the start and Pause
+    pressed (as a user clicks: at the button's place) once the clip has played 2 s.
+
+    Returns ``{"gaps": |readout step - clip step| per look with the clip playing, "frame_s": the
+    time between the page's animation frames during playback, as a look at a random moment finds
+    it (:func:`time_weighted_median`) [s], "pauses": [{"s": press
+    to answered [s], "step": where it stopped, "clip_step": the clip's step at the press}]}``.
+    """
+    fps = tab.loaded.timeline.fps
+    page.get_by_role("button", name="Play").click()
+    wait_until(lambda: tab.playing, what="playback to start")
+    page.evaluate(FRAME_TIMES)
+    looks = []
+    while tab.playing:  # to the rollout's end
+        looks.append(page.evaluate(ARM_AND_VIDEO_STEP))
+        time.sleep(0.05)
+    gaps = [abs(look["arm"] - look["video"]) for look in looks if look["video"] is not None and look["arm"] is not None]
+    frame_s = time_weighted_median(page.evaluate("() => window.__frames.splice(0)")) / 1e3
+    page.evaluate(PAUSE_ANSWER)
+    pauses = []
+    for _ in range(presses):
+        tab.set_step(0)
+        wait_until(lambda: page.evaluate(ARM_AND_VIDEO_STEP)["grid"] == 0, what="the first step's images")
+        page.get_by_role("button", name="Play").click()
+        box = page.get_by_role("button", name="Pause").bounding_box()
+        wait_until(lambda: (page.evaluate(ARM_AND_VIDEO_STEP)["video"] or 0) > 2 * fps, timeout=60, interval=0.05,
+                   what="the clip to play for 2 s")
+        clip_step = page.evaluate(ARM_AND_VIDEO_STEP)["video"]
+        page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+        answer = wait_until(lambda: page.evaluate("() => window.__answer"), timeout=60, interval=0.05,
+                            what="Pause to bring back the images and the readout of one step")
+        wait_until(lambda: not tab.playing, what="the tab to pause")
+        pauses.append({"s": answer["ms"] / 1e3, "step": answer["step"], "clip_step": clip_step, "tab_step": tab.step})
+    return {"gaps": gaps, "frame_s": frame_s, "pauses": pauses}
+
+
+def time_weighted_median(durations: Sequence[float]) -> float:
+    """The duration half of the time is spent in intervals at least as long as: what a look at a
+    random moment finds (a page that stalls for a second now and then spends much of its time in
+    those seconds, which the plain median of its frame times hides)."""
+    ordered = sorted(durations)
+    total, seen = sum(ordered), 0.0
+    for d in ordered:
+        seen += d
+        if seen >= total / 2:
+            return d
+    return 0.0

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 from browser import (
+    ARM_AND_VIDEO_STEP,
     canvas_is_drawn,
     frame_sources,
     hide_software_webgl_notice,
@@ -21,6 +22,7 @@ from browser import (
     open_app,
     open_page,
     page_client_id,
+    play_on_one_clock,
     select_option,
     skip_reason,
     slider_thumb,
@@ -489,3 +491,49 @@ def test_notes_fields_are_labelled_for_assistive_tech(browser, app):
                what="the chunk note's label to find its field again")
     assert page.get_by_label("Rollout note", exact=True).count() == 1
     page.close()
+
+
+def test_arms_readout_and_video_play_on_one_clock(browser):
+    """The demo at 1x with its clip playing: the step over the arms is the step of the video beside
+    them (median gap at most 3 steps), from the clip's first frame to the end; Pause is answered
+    within 1 s, the arms and the images on the step the clip had reached.
+
+    The arms move only when the page draws a 3D frame (in software WebGL here, 0.1-0.3 s on a
+    quiet machine, a second and more now and then on a loaded one), so between frames the readout
+    stands while the video moves on: the bounds take the larger of the spec and what the page's
+    own frames allow (a frame as a look at a random moment finds it; for the gap one frame's
+    steps: the readout stands for up to a frame, and the lead is measured over frames whose
+    length changes; two frames for Pause). The server's own clock, the clock before, ran 20-160 steps ahead
+    for the whole playback."""
+    import statistics
+
+    from inspector.data.sources import BUNDLED_DEMO
+
+    demo = serve([BUNDLED_DEMO], port=0, block=False)
+    try:
+        page, tab = new_page(browser, demo)
+        open_in_page(page, tab, demo, "prompt_train")
+        fps = tab.loaded.timeline.fps
+        wait_until(lambda: tab.controls.light_3d.value is True, what="the page to tick Light 3D")
+        tab.play()  # encode the clips once: the measured Play finds them cached
+        wait_until(lambda: tab._clip is not None, timeout=180, what="the playback clips")
+        tab.pause()
+        tab.set_step(0)
+        wait_until(lambda: page.evaluate(ARM_AND_VIDEO_STEP)["images"], timeout=60, what="the images back")
+
+        measured = play_on_one_clock(page, tab)
+        gaps, frame_s, (pause,) = measured["gaps"], measured["frame_s"], measured["pauses"]
+        assert len(gaps) >= 5, f"the clip played in only {len(gaps)} looks"
+        gap_bound = max(3.0, frame_s * fps)
+        assert statistics.median(gaps) <= gap_bound, (
+            f"median gap {statistics.median(gaps):.1f} steps (bound {gap_bound:.1f}; a 3D frame every "
+            f"{frame_s * 1e3:.0f} ms); gaps: {[round(g) for g in gaps]}")
+        pause_bound = max(1.0, 2 * frame_s)
+        assert pause["s"] <= pause_bound, f"Pause answered after {pause['s']:.2f} s (bound {pause_bound:.2f} s)"
+        assert pause["tab_step"] == pause["step"]  # the arms are where the images are
+        # it stopped where the clip was, give or take what the clip played while the press travelled
+        # (a page too busy to pass the press on is as late with its last report of the clip)
+        assert abs(pause["step"] - pause["clip_step"]) <= fps * pause["s"] + 3, pause
+        page.close()
+    finally:
+        demo.stop()

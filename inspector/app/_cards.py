@@ -226,14 +226,15 @@ def error_card(title: str, error: BaseException) -> str:
 def video_grid(pairs: Sequence[FramePair], step: int, t_s: float,
                compare: dict[str, FramePair] | None = None, compare_tag: str | None = None,
                large: bool = False, clips: dict[tuple[str, str], str] | None = None,
-               clip_clock: tuple[int, int, float, float] | None = None) -> str:
+               clip_clock: tuple[int, int, float, float] | None = None, clip_id: int | None = None) -> str:
     """One row per view: the imagined frame beside the GT frame at the same time (and the compared
     rollout's imagined frame), with the PSNR of each pair; ``large`` stacks one view's frames.
 
     ``clips`` maps (view, kind) to a playback clip's video URI: that cell plays it instead of
     showing the step's frame (kind ``imagined``, ``gt`` or ``compare``). ``clip_clock`` (the clips'
     first and end step, their frames/s, the rollout's steps/s) lets the time line under the frames
-    follow the playing clip in the page rather than stand at the step it started from.
+    follow the playing clip in the page rather than stand at the step it started from;
+    ``clip_id`` names the clips, so the page's reports of where they are say which (see ._clip_clock).
     """
     if not pairs:
         return f"<div style='{CARD};{MUTED}'>No video for this rollout.</div>"
@@ -274,6 +275,8 @@ def video_grid(pairs: Sequence[FramePair], step: int, t_s: float,
         first, end, clip_fps, steps_per_s = clip_clock
         clock = (f" data-clip-first='{first}' data-clip-end='{end}' data-clip-fps='{clip_fps:.6g}'"
                  f" data-steps-per-s='{steps_per_s:.6g}'")
+        if clip_id is not None:
+            clock += f" data-clip-id='{int(clip_id)}'"
     return (f"<div class='inspector-video' data-step='{step}'{clock} style='font-family:sans-serif'>{''.join(rows)}"
             f"<div class='inspector-time' style='font-size:0.7rem;color:#6b7280'>t = {t_s:.2f} s · step {step}</div></div>")
 

@@ -16,6 +16,7 @@ from ..analysis.metrics import prompt_divergence
 from ..analysis.timeline import RolloutTimeline
 from ..units import JOINT_NAMES
 from ._cards import unit
+from ._clip_clock import CLIP_CLOCK_HTML, CLIP_CLOCK_LABEL
 from ._keys import KEYS_HTML
 from ._label_ids import LABEL_IDS_HTML
 from ._light_3d import LIGHT_3D_HINT, LIGHT_3D_HTML, LIGHT_3D_LABEL
@@ -38,7 +39,7 @@ class ControlPanel:
         options = list(self.option_to_key) or ["(no rollouts)"]
         # data-inspector-client lets a test find the server-side tab of a page.
         gui.add_html(f"<div data-inspector-client='{int(client_id)}' style='font-weight:600;"
-                     f"font-size:0.95rem;padding:0 0.2rem'>SO-101 rollout inspector{LABEL_IDS_HTML}{LIGHT_3D_HTML}{KEYS_HTML}</div>")
+                     f"font-size:0.95rem;padding:0 0.2rem'>SO-101 rollout inspector{LABEL_IDS_HTML}{LIGHT_3D_HTML}{KEYS_HTML}{CLIP_CLOCK_HTML}</div>")
         # the whole evaluation in one table (see ._overview, which wires it)
         self.show_overview = gui.add_button("Overview", icon="table", hint="Every served rollout in one table")
         self.picker = gui.add_dropdown("Rollout", options, initial_value=options[0])
@@ -84,6 +85,8 @@ class VideoPanel:
     def __init__(self, gui) -> None:
         self.view = gui.add_dropdown("Video", (ALL_VIEWS,), initial_value=ALL_VIEWS)
         self.html = gui.add_html("<div>loading…</div>")
+        # The page's script writes where its playback clip is here, and hides it (see ._clip_clock).
+        self.clock = gui.add_text(CLIP_CLOCK_LABEL, "")
 
     def set_views(self, views: Sequence[str]) -> None:
         options = (ALL_VIEWS, *views) if len(views) > 1 else (ALL_VIEWS,)

@@ -7,8 +7,8 @@ presented by the browser's compositor, off the page's main thread, so the same f
 their rate whatever the 3D view costs. On Play the tab encodes, per video panel, the very frames
 the panel would show step by step (display size, from the frame cache) into an H.264 clip at the
 playback rate, and swaps it in where the images were, started at the step playback is at; the
-arms, readout and plot cursors keep following the server's clock. Pause (or a seek, a speed or
-view change, or the rollout's end) brings the images back.
+arms, readout and plot cursors then follow the clip as the page plays it (see ``._clip_clock``).
+Pause (or a seek, a speed or view change, or the rollout's end) brings the images back.
 """
 
 from __future__ import annotations

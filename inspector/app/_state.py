@@ -38,6 +38,7 @@ from . import _playback_clip
 from ._annotations import rollout_annotations, update_annotation
 from ._cards import error_card, esc, headline_metrics, rollout_card, unit, video_grid
 from ._catalog import Loaded
+from ._clip_clock import ClipClock
 from ._frames import FramePair
 from ._host import AppHost
 from ._keys import HOTKEYS
@@ -96,6 +97,8 @@ class TabState:
         self._video_html = ""
         self._clip: _Clip | None = None  # the playback clips the video panel is playing
         self._next_clip: _Clip | None = None  # the ones encoded for the steps after them
+        self._clips_shown = 0  # ids of the clips sent to the page, so its reports name theirs
+        self.clip_clock = ClipClock()  # where the page's clip is, as the page reports it
         self._notes: dict[str, Any] = {}
         self._shown_chunk: int | None = None
         self._listener = self._on_frames  # one bound method, so it can be removed again
@@ -360,6 +363,7 @@ class TabState:
                 self._show_next_clip()
                 return
         self._clip = None
+        self.clip_clock.stop()
         tl = loaded.timeline
         cmp = self.compare
         self.pairs, self.compare_pairs = self._pairs_at(self.step)
@@ -406,7 +410,7 @@ class TabState:
                      + (f" · chunk {chunk} / {tl.n_chunks - 1}" if tl.n_chunks > 1 else "")
                      + (f" · imagined frame {tl.frame_index(step)}" if tl.rollout.views else ""))
         c.readout.content = (
-            "<div style='font-size:0.78rem;line-height:1.4'>"
+            f"<div class='inspector-readout' data-step='{step}' style='font-size:0.78rem;line-height:1.4'>"
             f"t = <b>{tl.t_s[step]:.2f} s</b> · {where}"
             + (f"<br>{' · '.join(notes)}" if notes else "") + "</div>")
         if chunk != self._shown_chunk:
@@ -439,9 +443,13 @@ class TabState:
         with self.lock:
             if not self.playing:
                 return
+            clip_step = self.clip_clock.step(lead=False) if self._clip is not None else None
+            self.clip_clock.stop()
+            self.playing = False
+            if clip_step is not None and not at_end:  # stop where the page's clip is
+                self.set_step(min(clip_step, cast(Loaded, self.loaded).timeline.n_steps - 1), cursor=False)
             if self.loaded is not None:  # the cursors may lag a throttled playback step
                 self.plots.set_cursor(float(self.loaded.timeline.t_s[self.step]))
-            self.playing = False
             self._play_generation += 1
             self.controls.play.label = "Play"
             self.controls.play.icon = "player-play"
@@ -452,7 +460,8 @@ class TabState:
                 self._render_video()  # the step's frames again, where the clips stopped
 
     def _play_loop(self, generation: int) -> None:
-        """Advance at ``fps * speed`` steps per second, drawing at most PLAYBACK_FPS times a second.
+        """Advance at ``fps * speed`` steps per second, drawing at most PLAYBACK_FPS times a second;
+        while the page plays a clip and reports it, to the step the clip shows (see ._clip_clock).
 
         Stops when paused, when the rollout changes, at the last step, or when the tab closes.
         """
@@ -464,18 +473,25 @@ class TabState:
                 if generation != self._play_generation or self.loaded is None:
                     return
                 tl = self.loaded.timeline
-                budget += (now - last) * tl.fps * self.speed
-                last = now
-                n = int(budget)
-                if n == 0:
-                    continue
-                budget -= n
-                target = self.step + n
+                clip_step = self.clip_clock.step(now) if self._clip is not None else None
+                if clip_step is not None:  # the clip's clock
+                    budget, last = 0.0, now
+                    target = ClipClock.follow(self.step, clip_step)
+                    if target == self.step:
+                        continue
+                else:  # the server's
+                    budget += (now - last) * tl.fps * self.speed
+                    last = now
+                    n = int(budget)
+                    if n == 0:
+                        continue
+                    budget -= n
+                    target = self.step + n
                 at_end = target >= tl.n_steps - 1
                 # Plot cursors at PLOT_CURSOR_HZ: the arms and video move at the full rate.
                 cursor = at_end or now - last_cursor >= 1.0 / PLOT_CURSOR_HZ
                 last_cursor = now if cursor else last_cursor
-                self.set_step(target, cursor=cursor)
+                self.clip_clock.sent(self.set_step(target, cursor=cursor), now)
                 if at_end:
                     self.pause(at_end=True)
                     return
@@ -522,11 +538,13 @@ class TabState:
         offset_s = (self.step - clip.start) / clip.fps
         clips = {panel: f"{uri}#t={offset_s:.3f}" for panel, uri in clip.uris.items()}
         tl = self.loaded.timeline
+        self._clips_shown += 1
         self._video_html = video_grid(
             self.pairs, self.step, float(tl.t_s[self.step]), self.compare_pairs,
             self.compare.timeline.tag if self.compare else None, large=self.video.selected is not None,
-            clips=clips, clip_clock=(clip.start, clip.end, clip.fps, tl.fps))
+            clips=clips, clip_clock=(clip.start, clip.end, clip.fps, tl.fps), clip_id=self._clips_shown)
         self.video.html.content = self._video_html
+        self.clip_clock.shown(self._clips_shown, clip.start, clip.end, clip.fps, self.step)
         self._clip = clip  # last: whoever sees it set finds the page sent the clips
 
     # ------------------------------------------------------------------------------------------
@@ -680,6 +698,7 @@ class TabState:
 
         c.picker.on_update(user(lambda e: self._picked(e.target.value)))
         self.video.view.on_update(user(lambda e: self._redraw_video()))
+        self.video.clock.on_update(user(lambda e: self._clip_reported(e.target.value, time.monotonic())))
         # Slider callbacks may run out of order on the pool: read the latest value, not the event's.
         c.chunk.on_update(user(lambda e: self._slider_moved(c.chunk)))
         c.step_in_chunk.on_update(user(lambda e: self._slider_moved(c.step_in_chunk)))
@@ -728,6 +747,11 @@ class TabState:
                 self.set_chunk(int(c.chunk.value), source=slider)
             else:
                 self.set_chunk(self.chunk, int(c.step_in_chunk.value), source=slider)
+
+    def _clip_reported(self, report: str, received: float) -> None:
+        """The page's clip clock (its hidden field): the play loop follows it."""
+        with self.lock:
+            self.clip_clock.report(report, received)
 
     def _redraw_video(self) -> None:
         with self.lock:
