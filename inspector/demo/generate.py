@@ -12,6 +12,7 @@ bias_elbow              elbow_flex offset growing linearly to 15 deg
 limits_wrist            wrist_flex pushed to 120 deg mid-rollout, gripper below 0
 overrun_60chunks        60 chunks (540 steps) on a shorter episode: post-episode chunks
 prompt_train/novel      same start; novel veers for 2 chunks, then the same path
+video_ahead_1s          the joints follow the GT path, the imagined video shows it 1 s later
 single_fNNN             single chunks along an episode, error growing with the horizon
 ======================  ==============================================================
 
@@ -90,7 +91,9 @@ def rebuild_demo(out: Path | None = None, quick: bool = False, log: Callable[[st
         for spec in _rollout_specs(episodes, rng, quick):
             ep = episodes[spec.episode]
             executed, chunks, path_time = spec.build(ep.action, rng)
-            frames = _imagine(imagined_scene, layouts, scripts[spec.episode][1], ep, executed, path_time, rng)
+            shown = _video_steps(len(executed), spec.video_lead_steps)
+            frames = _imagine(imagined_scene, layouts, scripts[spec.episode][1], ep, executed[shown],
+                              path_time[shown], rng)
             states = np.concatenate([executed[:1], chunks[:, EXECUTED - 1]]) if spec.kind == "autoregressive" else None
             writer.add_rollout(spec.tag, kind=spec.kind, actions=chunks, states=states, prompt=spec.prompt,
                                episode_index=spec.episode, start_frame=spec.start, fps=FPS,
@@ -124,6 +127,7 @@ class _Spec:
     tempo: float = 1.0
     offset: Callable[[npt.NDArray[np.integer]], npt.NDArray[np.float64]] | None = None  # (T,) step -> (T, 6)
     horizon_error: float = 0.0  # deg at the last horizon step (single chunks)
+    video_lead_steps: int = 0  # the imagined video shows the path this many steps ahead of the joints
 
     def build(self, gt: npt.NDArray[np.float64], rng: np.random.Generator):
         """(executed (T, 6), chunks (N, H, 6), path time (T,) [GT frame]) for this rollout."""
@@ -150,6 +154,11 @@ class _Spec:
         chunks[:, EXECUTED:, :5] += rng.normal(scale=0.6, size=(n_chunks, HORIZON - EXECUTED, 5)).cumsum(axis=1)
         executed = chunks[:, :EXECUTED].reshape(-1, 6)
         return executed, chunks, path_time[: len(executed)]
+
+
+def _video_steps(n_steps: int, lead: int) -> npt.NDArray[np.int64]:
+    """(T,) the executed step each imagined frame shows: ``lead`` steps ahead, held at the end."""
+    return np.minimum(np.arange(n_steps) + lead, n_steps - 1)
 
 
 def _sample(gt: npt.NDArray[np.float64], t: npt.NDArray[np.floating]) -> npt.NDArray[np.float64]:
@@ -191,10 +200,14 @@ def _rollout_specs(episodes: list[_Episode], rng: np.random.Generator, quick: bo
         _Spec("prompt_novel", "autoregressive", 0, "Pick the blue cube",
               "novel prompt: veers for 2 chunks, then collapses onto the training path", steps0, offset=veer),
     ]
-    starts = np.linspace(0, n1 - HORIZON - 1, 3 if quick else 6).astype(int)
-    specs += [_Spec(f"single_f{s:03d}", "single_chunk", 1, episodes[1].task,
-                    "single chunk, error growing along the horizon to 8 deg", HORIZON, start=int(s),
-                    horizon_error=8.0) for s in starts]
+    singles = [_Spec(f"single_f{s:03d}", "single_chunk", 1, episodes[1].task,
+                     "single chunk, error growing along the horizon to 8 deg", HORIZON, start=int(s),
+                     horizon_error=8.0) for s in np.linspace(0, n1 - HORIZON - 1, 3 if quick else 6).astype(int)]
+    # last, so the random draws of every rollout before it stay as they were
+    ahead = _Spec("video_ahead_1s", "autoregressive", 0, "Pick the red cube",
+                  "imagined video 1 s (30 frames) ahead of the predicted joints", steps0,
+                  video_lead_steps=int(FPS))
+    specs += [*singles, ahead]
     if quick:
         specs = [s for s in specs if s.tag in ("tempo_0.8x", "limits_wrist") or s.kind == "single_chunk"]
     return specs

@@ -1,0 +1,116 @@
+"""Video-action agreement: the imagined video's GT time against the predicted joints' GT time."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from inspector.analysis import video_action
+from inspector.analysis.timeline import build_timeline
+from inspector.data.session import SessionWriter, open_session
+
+FPS = 30.0
+EXECUTED, HORIZON = 9, 12
+N_STEPS = 90  # 10 chunks
+
+
+def _scene(t: np.ndarray, size=(96, 72)) -> np.ndarray:
+    """(len(t), H, W, 3) frames of a lit disc on a fixed textured backdrop, moving along a path
+    that never passes the same point twice (a stand-in for the arm)."""
+    w, h = size
+    rng = np.random.default_rng(5)
+    backdrop = (40 + 30 * rng.random((h // 8, w // 8))).repeat(8, 0).repeat(8, 1)
+    yy, xx = np.mgrid[0:h, 0:w]
+    frames = []
+    for ti in t:
+        u = ti / 120.0  # 0..1 over the clip
+        cx, cy = 12 + 70 * u, 36 + 22 * np.sin(2.5 * np.pi * u)
+        disc = np.exp(-((xx - cx) ** 2 + (yy - cy) ** 2) / (2 * 6.0 ** 2))
+        gray = backdrop + 200 * disc
+        frames.append(np.stack([gray, 0.8 * gray, 0.6 * gray], axis=-1))
+    return np.clip(frames, 0, 255).astype(np.uint8)
+
+
+def _joints(t: np.ndarray) -> np.ndarray:
+    """(len(t), 6) GT joints [deg], every time its own pose."""
+    u = np.asarray(t, np.float64)[:, None] / 120.0
+    return np.hstack([-40 + 80 * u, 10 * np.sin(3 * u), 20 + 30 * u, 5 * np.cos(2 * u), 0 * u, 30 + 0 * u])
+
+
+def _write(root: Path, shows: np.ndarray, gt_frames: np.ndarray, gt_joints: np.ndarray) -> None:
+    """A session with one autoregressive rollout following the GT joints, whose imagined frame f
+    shows GT frame ``shows[f]``; GT joints and frames carried with it."""
+    n_chunks = N_STEPS // EXECUTED
+    steps = np.minimum(np.arange(n_chunks)[:, None] * EXECUTED + np.arange(HORIZON), len(gt_joints) - 1)
+    with SessionWriter.create(root) as w:
+        w.add_rollout("r", kind="autoregressive", actions=gt_joints[steps], fps=FPS,
+                      executed_per_chunk=EXECUTED, frames_per_chunk=EXECUTED,
+                      videos={"front": gt_frames[shows]}, gt_actions=gt_joints, gt_videos={"front": gt_frames})
+
+
+@pytest.mark.parametrize("shift", [6, -4, 0])
+def test_a_clip_shifted_by_n_frames_reads_n_over_fps(tmp_path: Path, shift: int) -> None:
+    n_gt = N_STEPS + 12
+    times = np.arange(n_gt, dtype=np.float64)
+    gt_frames, gt_joints = _scene(times), _joints(times)
+    shows = np.clip(np.arange(N_STEPS) + shift, 0, n_gt - 1)
+    _write(tmp_path / "s", shows, gt_frames, gt_joints)
+
+    tl = build_timeline(open_session(tmp_path / "s").rollouts["r"])
+    va = tl.video_action("front")
+    assert va is not None and va.lag_s is not None
+    confident = np.isfinite(va.lag_s)
+    assert confident.mean() > 0.9
+    inside = confident & (np.arange(N_STEPS) + shift >= 0)  # frames that show a real GT frame
+    # every confident frame reads the shift within one frame
+    np.testing.assert_allclose(va.lag_s[inside], shift / FPS, atol=1.0 / FPS + 1e-9)
+    summary = va.summary()
+    assert summary["lag_s_median"] == pytest.approx(shift / FPS, abs=0.5 / FPS)
+    assert summary["video_tempo"] == pytest.approx(1.0, abs=0.05)
+    # the split: from the first chunk on, when the video runs 0.5 s or more away from the actions
+    assert summary["split_chunk"] is None
+
+
+def test_a_video_far_ahead_splits_from_its_first_chunk(tmp_path: Path) -> None:
+    n_gt = N_STEPS + 30
+    times = np.arange(n_gt, dtype=np.float64)
+    gt_frames, gt_joints = _scene(times), _joints(times)
+    _write(tmp_path / "s", np.arange(N_STEPS) + 24, gt_frames, gt_joints)  # 0.8 s ahead
+    va = build_timeline(open_session(tmp_path / "s").rollouts["r"]).video_action("front")
+    assert va is not None
+    assert va.summary()["lag_s_median"] == pytest.approx(0.8, abs=1.0 / FPS)
+    assert va.summary()["split_chunk"] == 0
+
+
+def test_a_still_clip_reads_no_match(tmp_path: Path) -> None:
+    still = np.repeat(_scene(np.array([40.0])), N_STEPS, axis=0)
+    _write(tmp_path / "s", np.arange(N_STEPS), still, _joints(np.arange(N_STEPS, dtype=np.float64)))
+    va = build_timeline(open_session(tmp_path / "s").rollouts["r"]).video_action("front")
+    assert va is not None
+    summary = va.summary()
+    assert summary["matched_fraction"] == 0.0
+    assert summary["lag_s_median"] is None and summary["lag_s_abs_mean"] is None
+    assert summary["video_tempo"] is None
+    assert summary["note"] is not None and summary["note"].startswith("no match")
+
+
+def test_a_frame_unlike_any_gt_frame_matches_nothing() -> None:
+    rng = np.random.default_rng(0)
+    gt = np.stack([video_action.thumbnail(f) for f in _scene(np.arange(60.0))])
+    noise = np.stack([video_action.thumbnail(rng.integers(0, 255, (72, 96, 3), dtype=np.uint8)) for _ in range(5)])
+    flat = np.stack([video_action.thumbnail(np.full((72, 96, 3), 128, np.uint8))])
+    match = video_action.match_frames(np.vstack([noise, flat, gt[10:11]]), gt)
+    assert not match.matched[:6].any()
+    assert match.gt_index[6] == 10
+
+
+def test_frame_match_round_trips_through_json() -> None:
+    gt = np.stack([video_action.thumbnail(f) for f in _scene(np.arange(30.0))])
+    match = video_action.match_frames(gt[::3], gt).reindexed(np.arange(30) * 2)
+    again = video_action.FrameMatch.from_json(match.to_json())
+    np.testing.assert_allclose(again.gt_index, match.gt_index)
+    assert again.ties == match.ties
+    with pytest.raises(ValueError):
+        video_action.FrameMatch.from_json({**match.to_json(), "ties": []})
