@@ -114,3 +114,29 @@ def test_frame_match_round_trips_through_json() -> None:
     assert again.ties == match.ties
     with pytest.raises(ValueError):
         video_action.FrameMatch.from_json({**match.to_json(), "ties": []})
+
+
+def test_the_recording_holds_both_gt_times_the_lag_and_the_split(tmp_path: Path) -> None:
+    from test_export import Recording, rrd_verify
+
+    from inspector.export import layout as L
+    from inspector.export.recording import write_recording
+
+    n_gt = N_STEPS + 30
+    times = np.arange(n_gt, dtype=np.float64)
+    _write(tmp_path / "s", np.arange(N_STEPS) + 24, _scene(times), _joints(times))
+    tl = build_timeline(open_session(tmp_path / "s").rollouts["r"])
+    path = write_recording(tl, tmp_path / "r.rrd")
+    rrd_verify(path)
+    rec = Recording(path)
+    va = tl.video_action("front")
+    assert va is not None and va.lag_s is not None and va.joints_gt_s is not None
+    frames, lag = rec.scalars(L.lag_path("front"), order_by=L.FRAME)
+    np.testing.assert_allclose(lag, va.lag_s[frames])
+    assert len(lag) == np.isfinite(va.lag_s).sum() > 0
+    _, video = rec.scalars(L.gt_time_path("front", "video"), order_by=L.FRAME)
+    _, joints = rec.scalars(L.gt_time_path("front", "joints"), order_by=L.FRAME)
+    np.testing.assert_allclose(video, va.video_gt_s[np.isfinite(va.video_gt_s)])
+    np.testing.assert_allclose(joints, va.joints_gt_s)
+    split_frames, _ = rec.scalars(L.gt_time_path("front", "split"), order_by=L.FRAME)
+    assert list(split_frames) == [0]  # 0.8 s ahead from the start: parted from chunk 0
