@@ -140,3 +140,53 @@ def test_the_recording_holds_both_gt_times_the_lag_and_the_split(tmp_path: Path)
     np.testing.assert_allclose(joints, va.joints_gt_s)
     split_frames, _ = rec.scalars(L.gt_time_path("front", "split"), order_by=L.FRAME)
     assert list(split_frames) == [0]  # 0.8 s ahead from the start: parted from chunk 0
+
+
+def test_the_app_plots_both_gt_times_marks_the_split_and_reads_the_lag(tmp_path: Path) -> None:
+    import time
+
+    from test_app import connect, key
+
+    from inspector.app import serve
+
+    n_gt = N_STEPS + 30
+    times = np.arange(n_gt, dtype=np.float64)
+    _write(tmp_path / "s", np.arange(N_STEPS) + 24, _scene(times), _joints(times))  # 0.8 s ahead
+    app = serve([tmp_path / "s"], port=0, block=False)
+    try:
+        client, tab = connect(app)
+        with client:
+            assert tab.open(key(app, "r"))
+            assert tab.loaded.frames.done.wait(120)
+            deadline = time.monotonic() + 60
+            while "front" not in tab.plots.agreements:  # the plots follow the frames' callback
+                assert time.monotonic() < deadline, "no agreement after the video metrics"
+                time.sleep(0.05)
+            plot = tab.plots.agreement_plot
+            assert plot is not None
+            labels = [s["label"] for s in plot.handle.series]
+            assert "video's GT time, front" in labels and "joints' GT time" in labels
+            assert "front: video and actions part (chunk 0)" in labels
+            tab.set_step(40, force=True)
+            import re
+
+            read = re.search(r"lag front ([+-][\d.]+) s", tab.controls.readout.content)
+            assert read is not None and float(read.group(1)) == pytest.approx(0.8, abs=1.0 / FPS)
+    finally:
+        app.stop()
+
+
+def test_the_overview_table_has_a_median_lag_column() -> None:
+    from inspector.app._overview_rows import OverviewRow
+    from inspector.app._overview_table import Query, select_rows, table_html
+
+    summary = {"tag": "r", "session": "s", "kind": "autoregressive", "prompt": "pick", "episode_index": 0,
+               "start_frame": 0, "rmse_deg": None, "per_step_mse": None, "chunk_joints": None, "n_chunks": 3,
+               "steps_per_chunk": 9, "episode_length": None, "time_aligned_drift": None, "best_match_drift": None,
+               "tempo": None, "ee_error_mm": None, "post_episode_chunks": 0, "limit_violations": {"steps": 0},
+               "video_psnr_db": {"front": 18.0},
+               "video_action": {"front": {"lag_s_median": 0.8, "lag_s_abs_mean": 0.8, "matched_fraction": 1.0,
+                                          "split_chunk": 0, "video_tempo": 1.0, "note": None}}}
+    rows = [OverviewRow("s / r", "s", "r", "autoregressive", "pick", Path("/nowhere"), summary, None)]
+    html = table_html(rows, select_rows(rows, Query(), {}), {})
+    assert ">lag front<" in html and ">+0.80<" in html
