@@ -44,8 +44,13 @@ TIE_FRACTION = 0.1
 # GT poses this close [data units] to the best match tie with it: the arm holding still, or a pose
 # the episode visits twice (the rest pose at its start and end).
 JOINT_TIE = 0.25
-# |lag| above this [s] means the video and the actions have parted.
+# |lag| above this [s] means the video and the actions have parted...
 SPLIT_LAG_S = 0.5
+# ...for good when it stays so in this share of the chunks that follow.
+SPLIT_SHARE = 2 / 3
+# A predicted pose farther than this [data units] from every GT pose has no GT time: the joints
+# are off the real path (a bias, a limit excursion), and the nearest pose would be a guess.
+JOINT_MATCH_MAX = 5.0
 
 
 def thumbnail(rgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
@@ -214,20 +219,24 @@ class VideoAction:
 
     def split_chunk(self) -> int | None:
         """The first chunk from which on |lag| (the median of each chunk's matched frames) stays
-        above :data:`SPLIT_LAG_S`; chunks without a matched frame neither start nor end it."""
+        above :data:`SPLIT_LAG_S`: it is above there and in at least :data:`SPLIT_SHARE` of the
+        measured chunks after it (a held pose, where no shift can show, does not end it; chunks
+        without a matched frame are not measured)."""
         lag = self.lag_s
         if lag is None:
             return None
-        split = None
+        above = []
         for chunk in np.unique(self.frame_chunk):
             values = np.abs(lag[(self.frame_chunk == chunk) & np.isfinite(lag)])
-            if values.size == 0:
-                continue
-            if np.median(values) > SPLIT_LAG_S:
-                split = int(chunk) if split is None else split
-            else:
-                split = None
-        return split
+            if values.size:
+                above.append((int(chunk), bool(np.median(values) > SPLIT_LAG_S)))
+        flags = np.array([a for _, a in above], dtype=np.float64)
+        # share of measured chunks above, from each chunk to the end
+        share = np.cumsum(flags[::-1])[::-1] / np.arange(len(flags), 0, -1) if len(flags) else flags
+        for (chunk, is_above), s in zip(above, share):
+            if is_above and s >= SPLIT_SHARE:
+                return chunk
+        return None
 
     def video_tempo(self) -> float | None:
         """Slope of the video's GT time against rollout time (1: the real episode's speed)."""
@@ -251,6 +260,8 @@ class VideoAction:
             note = "no match: no imagined frame resembles one GT frame more than the others"
         elif lag is None:
             note = "no GT joints: lag not measured"
+        elif not matched.size:
+            note = f"no lag: the predicted joints are more than {JOINT_MATCH_MAX:g} from every GT pose where the video matched"
         return {
             "lag_s_median": round(float(np.median(matched)), 4) if matched.size else None,
             "lag_s_abs_mean": round(float(np.abs(matched).mean()), 4) if matched.size else None,
@@ -318,10 +329,13 @@ def agreement(view: str, match: FrameMatch, frame_step: npt.NDArray[np.int64], s
     joints_step = None if joints is None else (joints.best_index[np.minimum(frame_step, len(joints.best_index) - 1)]
                                                - joints.offset).astype(np.float64)
     steps_of = np.asarray(gt_step_of_index, np.float64)
+    if joints is not None and joints_step is not None:
+        off_path = joints.best_drift[np.minimum(frame_step, len(joints.best_drift) - 1)] > JOINT_MATCH_MAX
+        joints_step[off_path] = np.nan
     for f in np.flatnonzero(match.matched) if steps_of.size else []:
         best = float(np.interp(match.gt_index[f], np.arange(steps_of.size), steps_of))
         video_step[f] = best
-        if joints_step is None or joints is None:
+        if joints_step is None or joints is None or not np.isfinite(joints_step[f]):
             continue
         runs = steps_of[np.clip(np.reshape(match.ties[f], (-1, 2)), 0, steps_of.size - 1)]  # (r, 2) in steps
         tied = joints.tied_steps(int(min(frame_step[f], len(joints.pred) - 1)))

@@ -12,7 +12,7 @@ bias_elbow              elbow_flex offset growing linearly to 15 deg
 limits_wrist            wrist_flex pushed to 120 deg mid-rollout, gripper below 0
 overrun_60chunks        60 chunks (540 steps) on a shorter episode: post-episode chunks
 prompt_train/novel      same start; novel veers for 2 chunks, then the same path
-video_ahead_1s          the joints follow the GT path, the imagined video shows it 1 s later
+video_ahead_1s          prompt_train's joints; its imagined video 1 s (30 frames) ahead of them
 single_fNNN             single chunks along an episode, error growing with the horizon
 ======================  ==============================================================
 
@@ -38,6 +38,7 @@ from ..units import JOINT_NAMES, Units
 DEMO_DIR = BUNDLED_DEMO  # what `inspector serve` opens with no path
 DATASET_DIR = "dataset"  # inside the session directory, so the demo travels as one folder
 HORIZON, EXECUTED, FPS = 24, 9, 30.0
+VIDEO_LEAD_STEPS = 30  # video_ahead_1s: its imagined video runs this many steps ahead of its joints
 SEED = 101
 
 
@@ -91,18 +92,33 @@ def rebuild_demo(out: Path | None = None, quick: bool = False, log: Callable[[st
         for spec in _rollout_specs(episodes, rng, quick):
             ep = episodes[spec.episode]
             executed, chunks, path_time = spec.build(ep.action, rng)
-            shown = _video_steps(len(executed), spec.video_lead_steps)
-            frames = _imagine(imagined_scene, layouts, scripts[spec.episode][1], ep, executed[shown],
-                              path_time[shown], rng)
+            frames = _imagine(imagined_scene, layouts, scripts[spec.episode][1], ep, executed, path_time, rng)
             states = np.concatenate([executed[:1], chunks[:, EXECUTED - 1]]) if spec.kind == "autoregressive" else None
             writer.add_rollout(spec.tag, kind=spec.kind, actions=chunks, states=states, prompt=spec.prompt,
                                episode_index=spec.episode, start_frame=spec.start, fps=FPS,
                                executed_per_chunk=EXECUTED, frames_per_chunk=EXECUTED,
                                videos=frames, extra={"planted_fault": spec.fault})
             log(f"rollout {spec.tag}: {spec.fault}")
+            if spec.tag == "prompt_train":
+                _write_video_ahead(writer, spec, chunks, states, frames, log)
     size_mb = sum(f.stat().st_size for f in out.rglob("*") if f.is_file()) / 1e6
     log(f"demo session {out}: {size_mb:.1f} MB in {time.perf_counter() - started:.0f} s")
     return out
+
+
+def _write_video_ahead(writer: SessionWriter, spec: _Spec, chunks: npt.NDArray[np.float64],
+                       states: npt.NDArray[np.float64] | None, frames: dict[str, npt.NDArray[np.uint8]],
+                       log: Callable[[str], None]) -> None:
+    """The video-action fault: ``spec``'s rollout (its joints as they are) whose imagined video
+    shows each step :data:`VIDEO_LEAD_STEPS` steps early (the last frame held at the end). Derived
+    from frames already rendered, so it costs no rendering and no random draw."""
+    fault = f"imagined video {VIDEO_LEAD_STEPS / FPS:g} s ({VIDEO_LEAD_STEPS} frames) ahead of the predicted joints"
+    ahead = {camera: f[np.minimum(np.arange(len(f)) + VIDEO_LEAD_STEPS, len(f) - 1)] for camera, f in frames.items()}
+    writer.add_rollout("video_ahead_1s", kind=spec.kind, actions=chunks, states=states, prompt=spec.prompt,
+                       episode_index=spec.episode, start_frame=spec.start, fps=FPS,
+                       executed_per_chunk=EXECUTED, frames_per_chunk=EXECUTED, videos=ahead,
+                       extra={"planted_fault": fault})
+    log(f"rollout video_ahead_1s: {fault}")
 
 
 def _speed_up(waypoints, speed: float):
@@ -127,7 +143,6 @@ class _Spec:
     tempo: float = 1.0
     offset: Callable[[npt.NDArray[np.integer]], npt.NDArray[np.float64]] | None = None  # (T,) step -> (T, 6)
     horizon_error: float = 0.0  # deg at the last horizon step (single chunks)
-    video_lead_steps: int = 0  # the imagined video shows the path this many steps ahead of the joints
 
     def build(self, gt: npt.NDArray[np.float64], rng: np.random.Generator):
         """(executed (T, 6), chunks (N, H, 6), path time (T,) [GT frame]) for this rollout."""
@@ -154,11 +169,6 @@ class _Spec:
         chunks[:, EXECUTED:, :5] += rng.normal(scale=0.6, size=(n_chunks, HORIZON - EXECUTED, 5)).cumsum(axis=1)
         executed = chunks[:, :EXECUTED].reshape(-1, 6)
         return executed, chunks, path_time[: len(executed)]
-
-
-def _video_steps(n_steps: int, lead: int) -> npt.NDArray[np.int64]:
-    """(T,) the executed step each imagined frame shows: ``lead`` steps ahead, held at the end."""
-    return np.minimum(np.arange(n_steps) + lead, n_steps - 1)
 
 
 def _sample(gt: npt.NDArray[np.float64], t: npt.NDArray[np.floating]) -> npt.NDArray[np.float64]:
@@ -200,14 +210,10 @@ def _rollout_specs(episodes: list[_Episode], rng: np.random.Generator, quick: bo
         _Spec("prompt_novel", "autoregressive", 0, "Pick the blue cube",
               "novel prompt: veers for 2 chunks, then collapses onto the training path", steps0, offset=veer),
     ]
-    singles = [_Spec(f"single_f{s:03d}", "single_chunk", 1, episodes[1].task,
-                     "single chunk, error growing along the horizon to 8 deg", HORIZON, start=int(s),
-                     horizon_error=8.0) for s in np.linspace(0, n1 - HORIZON - 1, 3 if quick else 6).astype(int)]
-    # last, so the random draws of every rollout before it stay as they were
-    ahead = _Spec("video_ahead_1s", "autoregressive", 0, "Pick the red cube",
-                  "imagined video 1 s (30 frames) ahead of the predicted joints", steps0,
-                  video_lead_steps=int(FPS))
-    specs += [*singles, ahead]
+    starts = np.linspace(0, n1 - HORIZON - 1, 3 if quick else 6).astype(int)
+    specs += [_Spec(f"single_f{s:03d}", "single_chunk", 1, episodes[1].task,
+                    "single chunk, error growing along the horizon to 8 deg", HORIZON, start=int(s),
+                    horizon_error=8.0) for s in starts]
     if quick:
         specs = [s for s in specs if s.tag in ("tempo_0.8x", "limits_wrist") or s.kind == "single_chunk"]
     return specs
