@@ -137,7 +137,7 @@ def test_compare_finds_the_worsened_rollouts(comparison):
     assert s["wilcoxon_p"] == pytest.approx(stats.wilcoxon([d for d in deltas if d]).pvalue)
     assert s["spearman_rmse"] > 0.5
     drift = comparison["time_aligned_drift"]
-    assert (drift["n_compared"], drift["a_better"], drift["b_better"]) == (11, len(WORSENED), 0)
+    assert (drift["n_compared"], drift["a_better"], drift["b_better"]) == (12, len(WORSENED), 0)
 
 
 def test_compare_delta_of_a_single_chunk_is_the_offset_s_effect(comparison):

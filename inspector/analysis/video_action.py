@@ -22,7 +22,7 @@ the agreement costs no decoding of its own.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, TypedDict
+from typing import TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -348,8 +348,3 @@ def agreement(view: str, match: FrameMatch, frame_step: npt.NDArray[np.int64], s
         video_step[f], joints_step[f] = middles[r], tied[k]
     return VideoAction(view, frame_step, frame_step // max(1, steps_per_chunk), video_step / fps,
                        match.confidence, None if joints_step is None else joints_step / fps, fps)
-
-
-def not_measured(reason: str) -> dict[str, Any]:
-    """What a row's ``video_action`` says when no view can be measured."""
-    return {"video_action": None, "video_action_note": reason}
