@@ -224,7 +224,7 @@ def test_overview_lists_sorts_filters_draws_and_opens(browser, demo_pair_app):
 
     select_option(page, "Sort by", "RMSE")
     wait_until(lambda: _numbers(_cells(page, "rmse")) == sorted(_numbers(_cells(page, "rmse")))
-               and len(_numbers(_cells(page, "rmse"))) == 24, what="rows ordered by RMSE")
+               and len(_numbers(_cells(page, "rmse"))) == 26, what="rows ordered by RMSE")
     assert _table_keys(page)[-1].endswith("/ tempo_0.8x")  # the demo's largest RMSE: its slow rollout
 
     search = _text_field(page, "Search prompts")
