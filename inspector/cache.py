@@ -42,6 +42,7 @@ DEFAULT_FRAME_CACHE_MB = 256
 SCHEMA = "inspector.metrics-cache/2"
 # The modules whose code decides the cached numbers.
 _METRIC_MODULES = ("analysis/metrics.py", "analysis/sweep.py", "analysis/video_metrics.py", "analysis/timeline.py",
+                   "analysis/video_action.py",
                    "robot/kinematics.py", "units.py", "data/ground_truth.py", "report/rows.py", "data/video.py")
 
 

@@ -104,6 +104,21 @@ def test_report_shows_each_fault(demo):
     assert "Prompt divergence" in out.stdout
 
 
+def test_report_finds_the_video_running_ahead_of_its_actions():
+    """video_ahead_1s: prompt_train's joints, its imagined video 30 frames (1 s) ahead of them."""
+    out = subprocess.run([sys.executable, "-m", "inspector", "report", str(DEMO_DIR), "--json"],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    rows = {r["tag"]: r for r in json.loads(out.stdout)["rollouts"]}
+    for view in ("front", "wrist"):
+        ahead = rows["video_ahead_1s"]["video_action"][view]
+        assert ahead["lag_s_median"] == pytest.approx(1.0, abs=0.1)
+        assert ahead["split_chunk"] == 0 and ahead["matched_fraction"] > 0.9
+        for tag, row in rows.items():
+            if row["kind"] == "autoregressive" and tag != "video_ahead_1s":
+                assert abs(row["video_action"][view]["lag_s_median"]) < 0.15, (tag, view)
+
+
 def _osmesa_available() -> str | None:
     probe = subprocess.run([sys.executable, "-c", "from inspector.demo.scene import DemoScene, REST_POSE;"
                             "DemoScene(32, 24, msaa=0, shadows=False).render(REST_POSE)"],

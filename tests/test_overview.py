@@ -73,12 +73,12 @@ def test_rows_are_computed_once_then_listed_from_the_cache(tmp_path, monkeypatch
     cache = MetricsCache(tmp_path / "cache")
     catalog = _catalog([session], cache)
     first = OverviewRows(catalog)
-    assert len(first) == 12 and all(r.pending or r.error for r in first.rows())  # listed before computing
+    assert len(first) == 13 and all(r.pending or r.error for r in first.rows())  # listed before computing
     first.start()
     assert first.done.wait(ROWS_TIMEOUT_S)
     rows = {r.tag: r for r in first.rows()}
     assert "actions.npy" in rows["bias_elbow"].error  # one bad rollout: its error row, the rest computed
-    assert first.n_computed == 11 and first.n_cached == 0
+    assert first.n_computed == 12 and first.n_cached == 0
     assert rows["tempo_0.8x"].summary["tempo"] == pytest.approx(0.8, abs=0.05)
 
     # A second app on the same cache lists every row without computing any.
@@ -91,7 +91,7 @@ def test_rows_are_computed_once_then_listed_from_the_cache(tmp_path, monkeypatch
     second = OverviewRows(_catalog([session], cache))
     second.start()
     assert second.done.wait(120)
-    assert second.n_cached == 11 and second.n_computed == 0
+    assert second.n_cached == 12 and second.n_computed == 0
     again = {r.tag: r for r in second.rows()}
     assert all(again[t].cached for t in rows if t != "bias_elbow")
     assert again["limits_wrist"].summary == rows["limits_wrist"].summary
@@ -220,11 +220,11 @@ def test_overview_lists_sorts_filters_draws_and_opens(browser, demo_pair_app):
     # shown by default (more than one rollout served): every rollout of both sessions
     assert page.locator(".inspector-overview table").first.is_visible()
     assert sorted(_table_keys(page)) == sorted(k for k, e in app.catalog.entries.items() if e.session)
-    assert len(_table_keys(page)) == 24
+    assert len(_table_keys(page)) == 26
 
     select_option(page, "Sort by", "RMSE")
     wait_until(lambda: _numbers(_cells(page, "rmse")) == sorted(_numbers(_cells(page, "rmse")))
-               and len(_numbers(_cells(page, "rmse"))) == 24, what="rows ordered by RMSE")
+               and len(_numbers(_cells(page, "rmse"))) == 26, what="rows ordered by RMSE")
     assert _table_keys(page)[-1].endswith("/ tempo_0.8x")  # the demo's largest RMSE: its slow rollout
 
     search = _text_field(page, "Search prompts")
@@ -266,10 +266,10 @@ def test_compare_with_a_session_shows_the_planted_winners_and_drift_figures(brow
     info = page.locator(".inspector-overview .ov-compare").first
     info.wait_for(state="visible")
     text = info.inner_text()
-    assert "12 pair(s) (12 by tag" in text
-    # B predicts 3 deg off on two rollouts: A wins those, the other ten tie
-    assert "A better in 2, B better in 0, ties 10" in text
-    keys = _wait_keys(page, lambda ks: len(ks) == 12, "B's rows set aside")
+    assert "13 pair(s) (13 by tag" in text
+    # B predicts 3 deg off on two rollouts: A wins those, the other eleven tie
+    assert "A better in 2, B better in 0, ties 11" in text
+    keys = _wait_keys(page, lambda ks: len(ks) == 13, "B's rows set aside")
     assert all(k.startswith("demo / ") for k in keys)
     for tag in OFFSET_TAGS:
         delta = page.locator(f"tr[data-key='demo / {tag}'] td[data-col='delta']").inner_text()

@@ -194,6 +194,26 @@ def test_drift_figure_draws_every_rollout_and_marks_each_episode_end(demo_report
         assert "end ep 0" in chart[1] and "end ep 1" in chart[1]
 
 
+def test_video_action_figure_draws_each_rollouts_median_lag(demo_report):
+    rows = demo_report["rollouts"]
+    expected = {(str(i), view): entry["lag_s_median"] for i, r in enumerate(rows)
+                for view, entry in (r["video_action"] or {}).items() if entry["lag_s_median"] is not None}
+    assert expected  # the demo's views have GT video and GT joints
+    page = render_report_html(demo_report)
+    [chart] = _charts(_figure(page, "video-action"))
+    mapping, svg = chart
+    drawn = {}
+    views = sorted({view for _, view in expected})
+    for m in re.finditer(r'<circle class="pt (c\d)" data-key="(\d+)" cx="([\d.]+)" cy="([\d.]+)"', svg):
+        x, y = _to_data(mapping, np.array([float(m.group(3))]), np.array([float(m.group(4))]))
+        view = views[int(m.group(1)[1:])]
+        drawn[(m.group(2), view)] = float(y[0])
+        assert x[0] == pytest.approx(int(m.group(2)), abs=_pixel(mapping, "x") * 0.6)
+    assert drawn.keys() == expected.keys()
+    for key, lag in expected.items():
+        assert drawn[key] == pytest.approx(lag, abs=_pixel(mapping, "y") * 0.6)
+
+
 def test_rows_know_their_episode_length(demo_report):
     from inspector.data.lerobot_dataset import open_dataset
 
@@ -265,7 +285,7 @@ def demo_page(tmp_path_factory) -> Path:
 
 def test_report_html_is_self_contained_and_links_exported_rrd(demo_page):
     page = demo_page.read_text()
-    assert page.count('<tr data-key="') == 12
+    assert page.count('<tr data-key="') == 13
     assert re.findall(r'<a href="([^"]+)"', page) == ["bias_elbow.rrd"]
     # nothing that a browser would fetch: no external src/href/url(), no @import
     assert not re.search(r'(src|href)\s*=\s*"(?!bias_elbow\.rrd)', page)
@@ -351,7 +371,7 @@ def test_report_opens_offline_in_chromium(demo_page, tmp_path):
 
             # the table: one row per rollout, sortable, filterable
             rows = page.locator("#rollouts tbody tr")
-            assert rows.count() == 12
+            assert rows.count() == 13
             headers = page.locator("#rollouts thead th")
             names = [h.strip() for h in headers.all_inner_texts()]
             col = names.index("RMSE")

@@ -26,6 +26,7 @@ from ..data.session import Rollout
 from ..units import DEFAULT_LIMIT_MARGIN_DEG, JOINT_NAMES, Units
 from . import metrics
 from .sweep import SweepMetrics, sweep_metrics
+from .video_action import JointTimes, VideoAction, agreement
 from .video_metrics import VideoMetrics, compare_clips
 
 Array = npt.NDArray[np.float64]
@@ -203,6 +204,27 @@ class RolloutTimeline:
             vm = compare_clips(view, [clip], gt, self.gt_index_of_frame(view), with_ssim)[0]
             self.set_video_metrics(vm)
         return vm
+
+    def video_action(self, view: str) -> VideoAction | None:
+        """Video-action agreement of ``view`` (from its video metrics, computed if not yet), or
+        None when the view has no GT frames."""
+        if view not in self.video_views():
+            return None
+        vm = self.video_metrics(view)
+        if vm.match is None:
+            return None
+        n_gt = self.gt.frames_in_clip(view)
+        gt_step = np.arange(n_gt)  # a dataset clip's frame i shows step i
+        if self.gt.carried:  # a carried clip's frame i pairs with imagined frame i (even past the rollout)
+            r = self.rollout
+            chunk, within = np.divmod(gt_step, r.frames_per_chunk)
+            gt_step = chunk * self.steps_per_chunk + (within * r.executed_per_chunk) // r.frames_per_chunk
+        joints = None
+        if self.best_match_index is not None and self.best_match_drift is not None and self.gt.actions is not None:
+            joints = JointTimes(self.pred, self.gt.actions, self.gt.offset, self.best_match_index,
+                                self.best_match_drift)
+        return agreement(view, vm.match, self.frame_step(vm.psnr_db.size), self.steps_per_chunk, self.fps,
+                         gt_step.astype(np.float64), joints)
 
     def set_video_metrics(self, vm: VideoMetrics) -> None:
         """Keep a view's video metrics computed elsewhere (a cache, the app's frame loader)."""

@@ -4,7 +4,8 @@ Only the per-frame numbers are kept: a 540-frame view costs two decoders and two
 memory, whatever the clips' length or size. Several imagined clips that share one GT clip (rollouts
 of the same dataset episode, from the same start frame) are compared in one pass, so the GT
 is decoded once for all of them. The GT frame is scaled to each imagined clip's size while
-decoding (swscale, area filter), as the metric definition asks.
+decoding (swscale, area filter), as the metric definition asks. The same pass takes a thumbnail
+of every imagined and every GT frame and matches them (:mod:`inspector.analysis.video_action`).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import numpy.typing as npt
 
 from ..data.video import ForwardReader, VideoClip
 from . import metrics
+from .video_action import FrameMatch, FrameMatchJson, match_frames, thumbnail
 
 Array = npt.NDArray[np.float64]
 Frame = npt.NDArray[np.uint8]
@@ -29,6 +31,7 @@ class VideoMetricsRecord(TypedDict):
     view: str
     psnr_db: list[float | None]
     ssim: list[float | None] | None
+    match: FrameMatchJson | None
 
 
 @dataclass
@@ -38,11 +41,13 @@ class VideoMetrics:
     Attributes:
         psnr_db: (F,) per imagined frame; NaN where no GT frame exists (past the episode).
         ssim: (F,) likewise, or None when not asked for (it costs ~10x the PSNR).
+        match: the GT frame each imagined frame resembles most, or None without a GT clip.
     """
 
     view: str
     psnr_db: Array
     ssim: Array | None = None
+    match: FrameMatch | None = None
 
     @property
     def mean_psnr_db(self) -> float | None:
@@ -51,12 +56,14 @@ class VideoMetrics:
 
     def to_json(self) -> VideoMetricsRecord:
         return {"view": self.view, "psnr_db": _floats(self.psnr_db),
-                "ssim": None if self.ssim is None else _floats(self.ssim)}
+                "ssim": None if self.ssim is None else _floats(self.ssim),
+                "match": None if self.match is None else self.match.to_json()}
 
     @classmethod
     def from_json(cls, data: VideoMetricsRecord) -> VideoMetrics:
-        ssim = data.get("ssim")
-        return cls(data["view"], _array(data["psnr_db"]), None if ssim is None else _array(ssim))
+        ssim, match = data.get("ssim"), data.get("match")
+        return cls(data["view"], _array(data["psnr_db"]), None if ssim is None else _array(ssim),
+                   None if match is None else FrameMatch.from_json(match))
 
 
 def _floats(a: Array) -> list[float | None]:
@@ -71,7 +78,8 @@ def compare_clips(view: str, imagined: Sequence[VideoClip], gt: VideoClip | None
                   gt_index_of: Callable[[int], int], with_ssim: bool = False,
                   on_imagined: Callable[[int, int, Frame], None] | None = None,
                   on_gt: Callable[[int, Frame], None] | None = None) -> list[VideoMetrics]:
-    """PSNR (and SSIM) of each imagined clip against the GT frames paired with its frames.
+    """PSNR (and SSIM) of each imagined clip against the GT frames paired with its frames, and
+    the GT frame each imagined frame resembles most (every GT frame of the clip is a candidate).
 
     Args:
         view: the camera name (for the result).
@@ -88,7 +96,15 @@ def compare_clips(view: str, imagined: Sequence[VideoClip], gt: VideoClip | None
         InspectorError: a clip cannot be decoded (naming it).
     """
     streams = [_Stream(clip) for clip in imagined]
-    gt_stream = ForwardReader(gt, on_gt) if gt is not None else None
+    gt_thumbs: list[tuple[int, np.ndarray]] = []
+    thumbs: list[list[np.ndarray | None]] = [[] for _ in streams]
+
+    def gt_seen(index: int, rgb: Frame) -> None:
+        gt_thumbs.append((index, thumbnail(rgb)))
+        if on_gt is not None:
+            on_gt(index, rgb)
+
+    gt_stream = ForwardReader(gt, gt_seen) if gt is not None else None
     psnr: list[list[float]] = [[] for _ in streams]
     ssim: list[list[float]] = [[] for _ in streams]
     f = 0
@@ -106,19 +122,32 @@ def compare_clips(view: str, imagined: Sequence[VideoClip], gt: VideoClip | None
             rgb = item[1]
             if on_imagined is not None:
                 on_imagined(b, f, rgb)
+            if gt_stream is not None:
+                _set(thumbs[b], f, thumbnail(rgb))
             gt_rgb = gt_stream.frame_at(target, rgb.shape[1::-1]) if gt_stream is not None and target >= 0 else None
             _set(psnr[b], f, np.nan if gt_rgb is None else float(metrics.psnr(rgb[None], gt_rgb[None])[0]))
             if with_ssim:
                 _set(ssim[b], f, np.nan if gt_rgb is None else float(metrics.ssim(rgb[None], gt_rgb[None])[0]))
-    if gt_stream is not None and on_gt is not None:
-        gt_stream.drain()  # the frames no imagined frame pairs with are still shown
-    return [VideoMetrics(view, np.array(p, dtype=np.float64), np.array(q, dtype=np.float64) if with_ssim else None)
-            for p, q in zip(psnr, ssim)]
+    if gt_stream is not None:
+        gt_stream.drain()  # every GT frame is a candidate match (and is shown), paired or not
+    matches = [_match(t, gt_thumbs) if gt_stream is not None else None for t in thumbs]
+    return [VideoMetrics(view, np.array(p, dtype=np.float64), np.array(q, dtype=np.float64) if with_ssim else None, m)
+            for p, q, m in zip(psnr, ssim, matches)]
 
 
-def _set(values: list[float], index: int, value: float) -> None:
-    """values[index] = value, padding a gap in the clip's numbering with NaN."""
-    values.extend([np.nan] * (index + 1 - len(values)))
+def _match(imagined: list[np.ndarray | None], gt: list[tuple[int, np.ndarray]]) -> FrameMatch:
+    """The frame match of one imagined clip's thumbnails (None: a gap) against the GT's."""
+    size = next((t.size for t in imagined if t is not None), 0) or (gt[0][1].size if gt else 0)
+    zero = np.zeros(size, np.float32)  # a gap matches nothing
+    frames = np.stack([zero if t is None else t for t in imagined]) if imagined else np.zeros((0, size), np.float32)
+    gt_frames = np.stack([t for _, t in gt]) if gt else np.zeros((0, size), np.float32)
+    # positions among the frames read -> indexes in the clip (its numbering may have gaps)
+    return match_frames(frames, gt_frames).reindexed([i for i, _ in gt])
+
+
+def _set(values: list, index: int, value) -> None:
+    """values[index] = value, padding a gap in the clip's numbering with NaN (None for thumbnails)."""
+    values.extend([np.nan if isinstance(value, float) else None] * (index + 1 - len(values)))
     values[index] = value
 
 

@@ -296,6 +296,11 @@ def _columns(views: Sequence[str], notes: Mapping[str, Note], comparison: Compar
                      cast(Callable[[OverviewRow], str],
                           lambda r, v=v: "" if r.summary is None else _f(r.summary["video_psnr_db"].get(v), ".1f")))
              for v in views]
+    cols += [_Column(f"lag {v}", f"median lag, video GT time − joints GT time, {v} camera [s] "
+                     "(+: the imagined video runs ahead of the predicted actions)",
+                     cast(Callable[[OverviewRow], str], lambda r, v=v: "" if r.summary is None else _f(
+                         ((r.summary.get("video_action") or {}).get(v) or {}).get("lag_s_median"), "+.2f")))
+             for v in views]
     cols += [
         _Column("⚑", "flagged in the Notes", lambda r: "⚑" if note_of(r).flag else "", False, "flag"),
         _Column("note", "the rollout's note", lambda r: _note_cell(note_of(r).note), False, "note"),

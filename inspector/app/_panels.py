@@ -14,6 +14,7 @@ import numpy as np
 
 from ..analysis.metrics import prompt_divergence
 from ..analysis.timeline import RolloutTimeline
+from ..analysis.video_action import VideoAction
 from ..units import JOINT_NAMES
 from ._cards import unit
 from ._clip_clock import CLIP_CLOCK_HTML, CLIP_CLOCK_LABEL
@@ -117,6 +118,9 @@ class PlotPanel:
         self._handles: list = []
         self.joint_plot: CursorPlot | None = None
         self.psnr_plot: CursorPlot | None = None
+        self.agreement_plot: CursorPlot | None = None
+        # each view's video-action agreement, once its video metrics are known
+        self.agreements: dict[str, VideoAction] = {}
         self._tl: RolloutTimeline | None = None
         self._cmp: RolloutTimeline | None = None
         self._psnr_views: tuple[str, ...] = ()
@@ -127,7 +131,8 @@ class PlotPanel:
         for p in self.plots:
             p.handle.remove()
         self._handles, self.plots = [], []
-        self.joint_plot = self.psnr_plot = None
+        self.joint_plot = self.psnr_plot = self.agreement_plot = None
+        self.agreements = {}
         self._tl = None
 
     def build(self, tl: RolloutTimeline, compare: RolloutTimeline | None,
@@ -189,6 +194,10 @@ class PlotPanel:
             if tl.rollout.views:
                 self.psnr_plot = self._add(CursorPlot(gui, "Video PSNR, imagined vs GT [dB]", *self._psnr_xy(psnr),
                                                       **common))
+            if tl.video_views():
+                self.agreements = self._known_agreements()
+                x, lines, marks = self._agreement_xy()
+                self.agreement_plot = self._add(CursorPlot(gui, AGREEMENT_TITLE, x, lines, marks=marks, **common))
 
     def _add(self, plot: CursorPlot) -> CursorPlot:
         self.plots.append(plot)
@@ -249,11 +258,87 @@ class PlotPanel:
             lines.append(Line(v, y, colors[i % len(colors)], 1.4))
         return x, lines
 
+    # -- video-action agreement ----------------------------------------------------------------
+    def _known_agreements(self) -> dict[str, VideoAction]:
+        """Agreement of the views whose video metrics are known (never computes them here)."""
+        tl = self._tl
+        assert tl is not None
+        known = tl.known_video_metrics()
+        out = {}
+        for view in tl.video_views():
+            if view in known and known[view].match is not None:
+                va = tl.video_action(view)
+                if va is not None:
+                    out[view] = va
+        return out
+
+    def _agreement_xy(self) -> tuple[np.ndarray, list[Line], list[tuple[float, str]]]:
+        """The video's GT time per view and the joints' GT time, per imagined frame, at the time
+        of the step each frame shows; a mark where video and actions part."""
+        tl = self._tl
+        assert tl is not None
+        if not self.agreements:
+            return tl.t_s, [Line("computing… / no GT video", np.full(tl.n_steps, np.nan), "#adb5bd")], []
+        n = max(va.video_gt_s.size for va in self.agreements.values())
+        x = tl.frame_step(n) / tl.fps + np.arange(n) * 1e-6  # several frames may show one step
+        colors = ("#e8590c", "#1c7ed6", "#2b8a3e", "#ae3ec9")
+        lines, marks = [], []
+        for i, (view, va) in enumerate(self.agreements.items()):
+            lines.append(Line(f"video's GT time, {view}", _padded(va.video_gt_s, n), colors[i % len(colors)], 1.4))
+            split = va.split_chunk()
+            if split is not None:
+                marks.append((float(tl.t_s[min(split * tl.steps_per_chunk, tl.n_steps - 1)]),
+                              f"{view}: video and actions part (chunk {split})"))
+        first = next(iter(self.agreements.values()))
+        if first.joints_gt_s is not None:
+            lines.append(Line("joints' GT time", _padded(first.joints_gt_s, n), PRED_HEX, 1.2, (4, 3)))
+        return x, lines, marks
+
+    def lag_text(self, step: int) -> str:
+        """The lag of each view at ``step`` for the readout ("" before any is known)."""
+        tl = self._tl
+        if tl is None or not self.agreements:
+            return ""
+        f = tl.frame_index(step)
+        parts = []
+        for view, va in self.agreements.items():
+            if f >= va.video_gt_s.size:
+                continue
+            lag = va.lag_s
+            if not np.isfinite(va.video_gt_s[f]):
+                parts.append(f"{view}: no match")
+            elif lag is None:
+                parts.append(f"{view} video at GT {va.video_gt_s[f]:.2f} s")
+            else:
+                parts.append(f"lag {view} {lag[f]:+.2f} s")
+        return " · ".join(parts)
+
     def update_psnr(self, psnr: dict[str, np.ndarray | None]) -> None:
-        """Redraw the PSNR plot once more views have their PSNR."""
+        """Redraw the PSNR and agreement plots once more views have their video metrics."""
+        if self._tl is not None and self.agreement_plot is not None:
+            known = self._known_views()
+            if known != tuple(self.agreements):
+                self.agreements = self._known_agreements()
+                x, lines, marks = self._agreement_xy()
+                self.agreement_plot.set_lines(lines, x=x, marks=marks)
         if self.psnr_plot is None or self._tl is None:
             return
         if tuple(v for v, p in psnr.items() if p is not None) == self._psnr_views:
             return
         x, lines = self._psnr_xy(psnr)
         self.psnr_plot.set_lines(lines, x=x)
+
+    def _known_views(self) -> tuple[str, ...]:
+        tl = self._tl
+        assert tl is not None
+        known = tl.known_video_metrics()
+        return tuple(v for v in tl.video_views() if v in known and known[v].match is not None)
+
+
+AGREEMENT_TITLE = "GT time: imagined video vs predicted joints [s]"
+
+
+def _padded(values: np.ndarray, n: int) -> np.ndarray:
+    out = np.full(n, np.nan)
+    out[: values.size] = values
+    return out

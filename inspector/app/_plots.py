@@ -21,6 +21,7 @@ Array = npt.NDArray[np.float64]
 TICK_COLOR = "#9aa0a6"
 END_COLOR = "#d62728"
 CURSOR_COLOR = "#111111"
+MARK_COLOR = "#495057"
 
 
 @dataclass
@@ -57,15 +58,17 @@ class CursorPlot:
         lines: data series.
         ticks: x of chunk boundaries (short ticks along the bottom).
         end: x of the real episode's end (a dashed red line), or None.
+        marks: further vertical lines, ``(x, label)`` each (dashed, dark).
         floor: pin the y axis bottom (0 for errors).
         height: chart height [px].
     """
 
     def __init__(self, gui, title: str, x: npt.ArrayLike, lines: Sequence[Line], *,
                  ticks: npt.ArrayLike = (), end: float | None = None, floor: float | None = None,
-                 height: int = 220, visible: bool = True) -> None:
+                 height: int = 220, visible: bool = True, marks: Sequence[tuple[float, str]] = ()) -> None:
         self._ticks = np.asarray(ticks, np.float64)
         self._end = end
+        self._marks = list(marks)
         self._floor = floor
         self._cursor_x: float | None = None
         self._build(np.asarray(x, np.float64), list(lines))
@@ -84,8 +87,12 @@ class CursorPlot:
     def visible(self, value: bool) -> None:
         self.handle.visible = value
 
-    def set_lines(self, lines: Sequence[Line], x: npt.ArrayLike | None = None, title: str | None = None) -> None:
-        """Replace the data series (e.g. another joint picked); markers and cursor stay."""
+    def set_lines(self, lines: Sequence[Line], x: npt.ArrayLike | None = None, title: str | None = None,
+                  marks: Sequence[tuple[float, str]] | None = None) -> None:
+        """Replace the data series (e.g. another joint picked); markers (unless ``marks`` replaces
+        the further ones) and cursor stay."""
+        if marks is not None:
+            self._marks = list(marks)
         self._build(self._x if x is None else np.asarray(x, np.float64), list(lines))
         self.handle.series = self._series_options()
         self.handle.scales = {"x": {"time": False, "range": self._x_range}, "y": {"range": self._y_range}}
@@ -116,6 +123,8 @@ class CursorPlot:
         if self._end is not None:
             groups.append((np.array([self._end, self._end]), np.array([lo, hi]),
                            _series("episode end", END_COLOR, 1.5, (6, 4))))
+        for mark_x, label in self._marks:
+            groups.append((np.array([mark_x, mark_x]), np.array([lo, hi]), _series(label, MARK_COLOR, 1.5, (3, 3))))
         all_x = np.concatenate([x, *[g[0] for g in groups]])
         order = np.argsort(all_x, kind="stable")  # equal x keep their order: a tick reads lo, hi, lo
         self._X = all_x[order]

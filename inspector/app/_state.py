@@ -403,6 +403,9 @@ class TabState:
             u = unit(tl)
             best = f" (best-match {tl.best_match_drift[step]:.1f}{u})" if tl.best_match_drift is not None else ""
             notes.append(f"{tl.labels.drift} {tl.time_aligned_drift[step]:.1f}{u}{best}")
+        lag = self.plots.lag_text(step)
+        if lag:
+            notes.append(esc(lag))
         if tl.kind == "episode":
             where = f"frame {step} / {tl.n_steps - 1}"
         else:

@@ -12,6 +12,7 @@ bias_elbow              elbow_flex offset growing linearly to 15 deg
 limits_wrist            wrist_flex pushed to 120 deg mid-rollout, gripper below 0
 overrun_60chunks        60 chunks (540 steps) on a shorter episode: post-episode chunks
 prompt_train/novel      same start; novel veers for 2 chunks, then the same path
+video_ahead_1s          prompt_train's joints; its imagined video 1 s (30 frames) ahead of them
 single_fNNN             single chunks along an episode, error growing with the horizon
 ======================  ==============================================================
 
@@ -37,6 +38,7 @@ from ..units import JOINT_NAMES, Units
 DEMO_DIR = BUNDLED_DEMO  # what `inspector serve` opens with no path
 DATASET_DIR = "dataset"  # inside the session directory, so the demo travels as one folder
 HORIZON, EXECUTED, FPS = 24, 9, 30.0
+VIDEO_LEAD_STEPS = 30  # video_ahead_1s: its imagined video runs this many steps ahead of its joints
 SEED = 101
 
 
@@ -97,9 +99,26 @@ def rebuild_demo(out: Path | None = None, quick: bool = False, log: Callable[[st
                                executed_per_chunk=EXECUTED, frames_per_chunk=EXECUTED,
                                videos=frames, extra={"planted_fault": spec.fault})
             log(f"rollout {spec.tag}: {spec.fault}")
+            if spec.tag == "prompt_train":
+                _write_video_ahead(writer, spec, chunks, states, frames, log)
     size_mb = sum(f.stat().st_size for f in out.rglob("*") if f.is_file()) / 1e6
     log(f"demo session {out}: {size_mb:.1f} MB in {time.perf_counter() - started:.0f} s")
     return out
+
+
+def _write_video_ahead(writer: SessionWriter, spec: _Spec, chunks: npt.NDArray[np.float64],
+                       states: npt.NDArray[np.float64] | None, frames: dict[str, npt.NDArray[np.uint8]],
+                       log: Callable[[str], None]) -> None:
+    """The video-action fault: ``spec``'s rollout (its joints as they are) whose imagined video
+    shows each step :data:`VIDEO_LEAD_STEPS` steps early (the last frame held at the end). Derived
+    from frames already rendered, so it costs no rendering and no random draw."""
+    fault = f"imagined video {VIDEO_LEAD_STEPS / FPS:g} s ({VIDEO_LEAD_STEPS} frames) ahead of the predicted joints"
+    ahead = {camera: f[np.minimum(np.arange(len(f)) + VIDEO_LEAD_STEPS, len(f) - 1)] for camera, f in frames.items()}
+    writer.add_rollout("video_ahead_1s", kind=spec.kind, actions=chunks, states=states, prompt=spec.prompt,
+                       episode_index=spec.episode, start_frame=spec.start, fps=FPS,
+                       executed_per_chunk=EXECUTED, frames_per_chunk=EXECUTED, videos=ahead,
+                       extra={"planted_fault": fault})
+    log(f"rollout video_ahead_1s: {fault}")
 
 
 def _speed_up(waypoints, speed: float):

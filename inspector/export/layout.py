@@ -15,6 +15,7 @@ Entity tree::
     /plots/joint_error/<joint>        prediction - GT per joint
     /plots/joints/<joint>/...         predicted, GT, limits, limit-violation markers
     /plots/ee_error_mm, /plots/psnr/<view>, /plots/chunk_rmse
+    /plots/gt_time/<view>/{video,joints,split}, /plots/lag/<view>   video-action agreement
     /plots/markers/episode_end
     /events                           TextLog at chunk boundaries and the episode's end
 
@@ -116,6 +117,16 @@ def psnr_path(view: str) -> str:
     return f"{PLOTS}/psnr/{view}"
 
 
+def gt_time_path(view: str, series: str) -> str:
+    """``series``: ``video`` (the video's GT time), ``joints`` (the joints'), ``split`` (the chunk
+    from which they part)."""
+    return f"{PLOTS}/gt_time/{view}/{series}"
+
+
+def lag_path(view: str) -> str:
+    return f"{PLOTS}/lag/{view}"
+
+
 def step_indexes(tl: RolloutTimeline, steps: npt.ArrayLike,
                  chunks: npt.ArrayLike | None = None) -> list[rr.TimeColumn]:
     """``time`` / ``frame`` / ``chunk`` columns for timeline steps (``chunks`` overrides the chunk)."""
@@ -137,6 +148,7 @@ class Contents:
         views: camera views, each with ``(has_imagined, has_gt)``.
         gt_joints: the GT arm, drift and error plots exist.
         psnr_views: views with a PSNR series.
+        agreement_views: views with video-action agreement series (GT times and lag).
         pred_name, gt_name: the arms' names in titles.
         chunks: the rollout has several chunks.
         eye: the 3D view's camera (position, look target) [m].
@@ -145,6 +157,7 @@ class Contents:
     views: dict[str, tuple[bool, bool]] = field(default_factory=dict)
     gt_joints: bool = False
     psnr_views: list[str] = field(default_factory=list)
+    agreement_views: list[str] = field(default_factory=list)
     pred_name: str = "predicted"  # what the two arms are ("commanded" / "measured" for an episode)
     gt_name: str = "GT"
     chunks: bool = True  # more than one chunk (else no chunk RMSE plot)
@@ -172,6 +185,12 @@ def build_blueprint(contents: Contents) -> rrb.Blueprint:
     if contents.psnr_views:
         plots.append(rrb.TimeSeriesView(name="Video PSNR [dB]", origin=f"/{PLOTS}/psnr",
                                         contents=["$origin/**", markers]))
+    if contents.agreement_views:
+        plots.append(rrb.TimeSeriesView(name="GT time: video vs joints [s]", origin=f"/{PLOTS}/gt_time",
+                                        contents=["$origin/**", markers]))
+        if contents.gt_joints:
+            plots.append(rrb.TimeSeriesView(name="Video-action lag [s]", origin=f"/{PLOTS}/lag",
+                                            contents=["$origin/**", markers]))
     if contents.gt_joints and contents.chunks:
         plots.append(rrb.TimeSeriesView(name="Chunk RMSE", origin=f"/{CHUNK_RMSE}",
                                         contents=["$origin", markers]))

@@ -42,7 +42,7 @@ from ..robot.kinematics import kinematics
 from . import layout as L
 from .arms import log_arms, prepare_meshes
 from .description import describe
-from .series import log_markers, log_metric_series, log_psnr
+from .series import log_markers, log_metric_series, log_psnr, log_video_action
 from .video import Progress, frame_indexes, log_view
 
 RRD_SUFFIX = ".rrd"
@@ -80,6 +80,7 @@ def write_recording(timeline: RolloutTimeline, path: str | Path, views: Sequence
         views={v: (v in timeline.rollout.views, v in timeline.gt.views) for v in views},
         gt_joints=timeline.has_gt_joints,
         psnr_views=[v for v, series in psnr.items() if np.isfinite(series).any()],
+        agreement_views=[v for v in psnr if timeline.video_action(v) is not None],
         pred_name=timeline.labels.pred, gt_name=timeline.labels.gt, chunks=timeline.n_chunks > 1,
         eye=eye_fitting(timeline),
     )
@@ -165,6 +166,9 @@ def _log_recording(rec: rr.RecordingStream, tl: RolloutTimeline, views: list[str
     log_markers(rec, tl, steps_indexes)
     for i, (view, series) in enumerate(psnr.items()):
         log_psnr(rec, tl, view, series, frames_indexes, L.VIEW_RGBA[i % len(L.VIEW_RGBA)])
+        agreement = tl.video_action(view)
+        if agreement is not None:
+            log_video_action(rec, agreement, frames_indexes, L.VIEW_RGBA[i % len(L.VIEW_RGBA)])
     lo, hi = _VIDEO_ASSETS
     with tempfile.TemporaryDirectory(prefix="inspector-video-") as tmp:
         for i, view in enumerate(views):

@@ -14,6 +14,7 @@ import numpy.typing as npt
 import rerun as rr
 
 from ..analysis.timeline import RolloutTimeline
+from ..analysis.video_action import VideoAction
 from ..units import JOINT_NAMES
 from . import layout as L
 
@@ -88,6 +89,29 @@ def log_psnr(rec: rr.RecordingStream, tl: RolloutTimeline, view: str, psnr_db: n
     """PSNR [dB] of ``view`` per imagined frame (frames without GT left out)."""
     return log_series(rec, L.psnr_path(view), np.arange(len(psnr_db)), psnr_db, frame_indexes_for,
                       f"{view} PSNR [dB]", rgba)
+
+
+def log_video_action(rec: rr.RecordingStream, va: VideoAction, frame_indexes_for: IndexesFor,
+                     rgba: Sequence[int]) -> int:
+    """Video-action agreement of one view per imagined frame: the video's and the joints' GT time
+    [s], their lag, and a marker where they part (frames without a match left out)."""
+    frames = np.arange(va.video_gt_s.size)
+    n = log_series(rec, L.gt_time_path(va.view, "video"), frames, va.video_gt_s, frame_indexes_for,
+                   f"{va.view} video's GT time [s]", rgba, points=True, marker_size=2.5)
+    lag = va.lag_s
+    if va.joints_gt_s is None or lag is None:
+        return n
+    log_series(rec, L.gt_time_path(va.view, "joints"), frames, va.joints_gt_s, frame_indexes_for,
+               "joints' GT time [s]", L.PRED_RGBA)
+    log_series(rec, L.lag_path(va.view), frames, lag, frame_indexes_for,
+               f"{va.view} lag, video - joints [s]", rgba, points=True, marker_size=2.5)
+    split = va.split_chunk()
+    if split is not None:
+        first = int(np.flatnonzero(va.frame_chunk >= split)[0])
+        log_series(rec, L.gt_time_path(va.view, "split"), [first], [va.joints_gt_s[first]], frame_indexes_for,
+                   f"{va.view}: video and actions part (chunk {split})", L.LIMIT_RGBA, points=True,
+                   marker="diamond", marker_size=8.0)
+    return n
 
 
 def log_markers(rec: rr.RecordingStream, tl: RolloutTimeline, indexes_for: IndexesFor) -> None:

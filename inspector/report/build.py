@@ -184,8 +184,12 @@ def format_report(report: dict[str, Any]) -> str:
     psnr_head = "".join(f" {'PSNR ' + v:>11}" for v in views)
     width = max([18] + [len(r["tag"]) for r in rows])
 
+    psnr_head += "".join(f" {'lag s ' + v:>11}" for v in views)
+
     def psnr_cells(r: dict[str, Any]) -> str:
-        return "".join(f" {_f(r['video_psnr_db'].get(v), '.1f'):>11}" for v in views)
+        lag = r.get("video_action") or {}
+        return ("".join(f" {_f(r['video_psnr_db'].get(v), '.1f'):>11}" for v in views)
+                + "".join(f" {_f((lag.get(v) or {}).get('lag_s_median'), '+.2f'):>11}" for v in views))
 
     if single:
         lines += ["Single-chunk predictions (each chunk's horizon vs logged GT)",
@@ -224,7 +228,8 @@ def format_report(report: dict[str, Any]) -> str:
         return "\n".join(lines)
     margin = rows[0]["limit_violations"]["margin_deg"]
     lines.append(f"lim.steps: steps with any joint more than {margin:g} deg past its URDF limit; "
-                 f"PSNR [dB]: imagined vs GT frames of that camera")
+                 f"PSNR [dB]: imagined vs GT frames of that camera; lag s: median of the video's GT time "
+                 f"minus the joints' (+: the video runs ahead of the actions)")
     agg = report["aggregate"]
     psnr = ", ".join(f"{v} {m:.2f}" for v, m in agg["mean_video_psnr_db"].items()) or "-"
     lines.append(f"Aggregate over {agg['n']} rollouts: RMSE mean {_f(agg['mean_rmse_deg'], '.3f')}, "

@@ -6,7 +6,8 @@ They reproduce the DreamZero-SO101 report's figures from raw outputs:
 - **RMSE against position in the episode** (start frame / episode length) of single-chunk samples;
 - **per-joint predicted vs GT** of single-chunk samples over the horizon;
 - **time-aligned drift per chunk** of every autoregressive rollout on one plot, each episode's end
-  marked, **best-match drift** beside it.
+  marked, **best-match drift** beside it;
+- **video-action lag** of every rollout and view (does the imagined video show what its joints say?).
 
 Each figure (:data:`FIGURES`) has a data function (plain numbers, what a test or another view
 checks) and a function drawing it as inline SVG (:mod:`inspector.report.svg`), which any page that
@@ -121,6 +122,55 @@ def _draw_per_step_rmse(fig: Figure, rows: Sequence[Row], data: dict[str, Any]) 
     fig.legend = ax.legend
     if data["n_other_horizon"]:
         fig.note = f"{data['n_other_horizon']} sample(s) with another horizon left out"
+
+
+# ----------------------------------------------------------------------------------------------
+# Video-action lag across rollouts
+
+
+def video_action_lags(rows: Sequence[Row]) -> dict[str, Any] | None:
+    """Median lag (video GT time - joints GT time) of every rollout and view that has one.
+
+    Returns:
+        None when no rollout has a lag, else ``views`` and, per view, ``keys`` (row indexes) and
+        ``lag`` (s).
+    """
+    by_view: dict[str, tuple[list[int], list[float]]] = defaultdict(lambda: ([], []))
+    for i, r in enumerate(rows):
+        for view, entry in sorted((r.get("video_action") or {}).items()):
+            if entry is not None and entry.get("lag_s_median") is not None:
+                by_view[view][0].append(i)
+                by_view[view][1].append(entry["lag_s_median"])
+    if not by_view:
+        return None
+    return {"views": sorted(by_view),
+            **{view: {"keys": keys, "lag": np.array(lags, dtype=np.float64)} for view, (keys, lags) in by_view.items()}}
+
+
+def _draw_video_action_lags(fig: Figure, rows: Sequence[Row], data: dict[str, Any]) -> None:
+    from ..analysis.video_action import SPLIT_LAG_S
+
+    n = len(rows)
+    lags = np.concatenate([data[v]["lag"] for v in data["views"]])
+    reach = max(2 * SPLIT_LAG_S, float(np.abs(lags).max()) * 1.1)
+    ax = Axes(x_label="rollout (table order)", y_label="median lag, video - joints [s]", x_min=0,
+              x_max=max(1.0, n - 1.0), y_min=-reach, y_max=reach)
+    ax.band([0, max(1.0, n - 1.0)], [-SPLIT_LAG_S, -SPLIT_LAG_S], [SPLIT_LAG_S, SPLIT_LAG_S],
+            label=f"|lag| <= {SPLIT_LAG_S:g} s")
+    sessions = _n_sessions(rows)
+    for v_i, view in enumerate(data["views"]):
+        keys = data[view]["keys"]
+        titles = []
+        for k in keys:
+            entry = rows[k]["video_action"][view]
+            split = "" if entry.get("split_chunk") is None else f", parts from chunk {entry['split_chunk']}"
+            titles.append(f"{_label(rows[k], sessions)} {view}: median lag {entry['lag_s_median']:+.2f} s, "
+                          f"mean |lag| {entry['lag_s_abs_mean']:.2f} s, "
+                          f"{100 * entry['matched_fraction']:.0f}% of frames matched{split}")
+        ax.points(keys, data[view]["lag"], colour_class(v_i), titles=titles, keys=[str(k) for k in keys],
+                  label=view)
+    fig.panels.append(Panel(ax.svg()))
+    fig.legend = ax.legend
 
 
 # ----------------------------------------------------------------------------------------------
@@ -342,6 +392,13 @@ FIGURES = [
           "(speed-invariant), averaged over each chunk's executed steps [data units]. Vertical lines: "
           "each episode's end; dashed: post-episode chunks (compared with the episode's last frame).",
           _drift_data, _draw_drift, _no_drift),
+    _Spec("video-action", "Video-action lag across rollouts",
+          "Does the imagined video show what the predicted joints say? Each imagined frame is matched to the "
+          "GT frame of its camera it resembles most; its GT time minus the GT time the predicted joints "
+          "match is the lag (positive: the video runs ahead of the actions). Each dot: a rollout's median "
+          "lag over its matched frames, colour: camera; shaded: within 0.5 s.",
+          video_action_lags, _draw_video_action_lags,
+          _say("no rollout with GT video, GT joints and a confident frame match")),
 ]
 
 

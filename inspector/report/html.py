@@ -106,6 +106,12 @@ def _columns(rows: Sequence[Row], views: list[str]) -> list[tuple[str, str, bool
     for view in views:
         cols.append((f"PSNR {view}", f"imagined vs GT frames, {view} camera [dB]", True,
                      cast(Callable[[Row], str], lambda r, v=view: _f(r["video_psnr_db"].get(v), ".1f"))))
+    for view in views:
+        cols.append((f"lag {view}", f"median lag, video GT time - joints GT time, {view} camera [s] "
+                     "(+: the video runs ahead of the actions)", True,
+                     cast(Callable[[Row], str],
+                          lambda r, v=view: _f(((r.get("video_action") or {}).get(v) or {}).get("lag_s_median"),
+                                               "+.2f"))))
     cols += [
         ("worst", "the worst chunk (largest time-aligned drift, else limit excess)", True,
          lambda r: _f((r.get("worst_chunk") or {}).get("chunk"), "d")),

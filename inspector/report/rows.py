@@ -16,6 +16,7 @@ import numpy as np
 
 from ..analysis import metrics
 from ..analysis.timeline import RolloutTimeline
+from ..analysis.video_action import ViewAgreementJson
 from ..analysis.video_metrics import VideoMetrics
 from ..data.session import RolloutKind
 from ..schema import Keys, Length
@@ -85,6 +86,8 @@ class RolloutRow(TypedDict):
     limit_violations: LimitRecord
     worst_chunk: WorstChunk
     video_psnr_db: dict[str, float]
+    video_action: dict[str, ViewAgreementJson] | None  # per view; null with video_action_note saying why
+    video_action_note: str | None
     post_episode_chunks: int | None
     gt_source: str
     gt_warning: str | None
@@ -136,6 +139,7 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> d
         inside = _in_episode(tl, tl.ee_error_mm)
         ee = {"mean": float(inside.mean()), "final": float(inside[-1])}
     psnr = {view: vm.mean_psnr_db for view, vm in sorted(video.items()) if vm.mean_psnr_db is not None}
+    agreement, agreement_note = video_action_record(tl, video)
     worst, worst_by = tl.worst_chunk()
     episode_length = None
     if tl.gt.episode_length is not None:  # counted from the rollout's step 0: back to the episode's start
@@ -162,6 +166,8 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> d
         "limit_violations": limit_record(tl.limit_summary(), tl.limit_margin_deg),
         "worst_chunk": {"chunk": worst, "by": worst_by},
         "video_psnr_db": psnr,
+        "video_action": agreement,
+        "video_action_note": agreement_note,
         "post_episode_chunks": post_chunks,
         "gt_source": tl.gt.source,
         "gt_warning": tl.gt.warning,
@@ -170,6 +176,22 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> d
         "outcome": r.extra.get("outcome"),
     }
     return cast(dict[str, Any], row)  # a plain dict from here on, as every other report record
+
+
+def video_action_record(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]
+                        ) -> tuple[dict[str, ViewAgreementJson] | None, str | None]:
+    """The ``video_action`` field (per view: lag, matched fraction, split chunk, video tempo) and,
+    where it is null, why."""
+    views = [v for v in sorted(video) if video[v].match is not None]
+    if not views:
+        why = "no GT video" if not tl.video_views() else "video not compared"
+        return None, f"not measured: {why}"
+    out: dict[str, ViewAgreementJson] = {}
+    for view in views:
+        va = tl.video_action(view)
+        if va is not None:
+            out[view] = va.summary()
+    return out, None
 
 
 def _chunk_joints(tl: RolloutTimeline) -> ChunkJoints | None:

@@ -1,0 +1,350 @@
+"""Video-action agreement: does the imagined video show what the predicted joints say?
+
+Both are put on one ruler, the real (GT) episode:
+
+- the **video's GT time**: each imagined frame is matched to the GT frame of the same camera it
+  resembles most. Frames become small grayscale thumbnails, each normalised to zero mean and unit
+  length, so a whole clip against the whole GT clip is one matrix product of correlations. The
+  match's **confidence** is how much better the best correlation is than the typical one (the
+  median over the GT frames): a flat row of scores (a still scene, a frame unlike any GT frame)
+  is "no match", never a guess.
+- the **joints' GT time**: the GT frame whose pose the predicted step is nearest to (the
+  best-match argmin of :mod:`inspector.analysis.metrics`).
+
+**Lag** = the video's GT time - the joints' GT time [s]; positive: the video is ahead of the actions.
+Without GT joints the video's GT time still gives the **video's tempo** (its speed against the
+real episode), as the joints' best match gives theirs.
+
+Thumbnails are taken while the clips stream for PSNR (:mod:`inspector.analysis.video_metrics`), so
+the agreement costs no decoding of its own.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TypedDict
+
+import numpy as np
+import numpy.typing as npt
+
+from . import metrics
+
+Array = npt.NDArray[np.float64]
+
+# Thumbnail grid (rows, columns): fine enough to see where the arm is, coarse enough to ignore the
+# blur, noise and small wobble of an imagined frame.
+THUMB_SHAPE = (24, 32)
+# A match counts when its correlation beats the median one by this much...
+MIN_CONFIDENCE = 0.05
+# ...and the frames correlate at all (a frame unlike any GT frame still has a best one).
+MIN_CORRELATION = 0.5
+# GT frames whose correlation is within this fraction of the confidence of the best one tie with it
+# (a held pose repeats one picture): the match is the middle of the tied run, as for the joints.
+TIE_FRACTION = 0.1
+# GT poses this close [data units] to the best match tie with it: the arm holding still, or a pose
+# the episode visits twice (the rest pose at its start and end).
+JOINT_TIE = 0.25
+# |lag| above this [s] means the video and the actions have parted...
+SPLIT_LAG_S = 0.5
+# ...for good when it stays so in this share of the chunks that follow.
+SPLIT_SHARE = 2 / 3
+# A predicted pose farther than this [data units] from every GT pose has no GT time: the joints
+# are off the real path (a bias, a limit excursion), and the nearest pose would be a guess.
+JOINT_MATCH_MAX = 5.0
+
+
+def thumbnail(rgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
+    """(rows * cols,) grayscale thumbnail of an (H, W, 3) frame, zero mean and unit length
+    (all zeros for a frame of one flat colour, which matches nothing)."""
+    rows, cols = THUMB_SHAPE
+    h, w = rgb.shape[:2]
+    # every ``stride``-th pixel first: 4x the grid still averages away pixel noise, at a fraction
+    # of the cost of converting the whole frame
+    stride = max(1, min(h // (4 * rows), w // (4 * cols)))
+    small = rgb[::stride, ::stride].astype(np.float32)
+    gray = small @ np.array([0.299, 0.587, 0.114], np.float32)
+    r_edges = np.linspace(0, gray.shape[0], rows + 1).astype(np.int64)
+    c_edges = np.linspace(0, gray.shape[1], cols + 1).astype(np.int64)
+    if gray.shape[0] < rows or gray.shape[1] < cols:  # tinier than the grid: nearest pixels
+        gray = gray[np.minimum(r_edges[:-1], gray.shape[0] - 1)][:, np.minimum(c_edges[:-1], gray.shape[1] - 1)]
+    else:
+        sums = np.add.reduceat(np.add.reduceat(gray, r_edges[:-1], axis=0), c_edges[:-1], axis=1)
+        gray = (sums / np.outer(np.diff(r_edges), np.diff(c_edges))).astype(np.float32)
+    v = gray.ravel()
+    v = v - v.mean()
+    norm = float(np.linalg.norm(v))
+    return v / norm if norm > 1e-3 * np.sqrt(v.size) else np.zeros_like(v)
+
+
+class FrameMatchJson(TypedDict):
+    """A :class:`FrameMatch` as the metrics cache stores it (None: no match, or no GT frame)."""
+
+    gt_index: list[float | None]
+    confidence: list[float | None]
+    ties: list[list[int]]
+
+
+@dataclass
+class FrameMatch:
+    """The GT frame each imagined frame of one view resembles most.
+
+    Attributes:
+        gt_index: (F,) index in the view's GT clip (the middle of the tied run holding the best
+            frame, so it may end in .5); NaN where the match is not confident (see
+            :attr:`matched`) or there is no GT frame.
+        confidence: (F,) best correlation minus the median one; NaN where there is no GT frame.
+        ties: per frame, the runs of GT indexes that tie with the best match, flattened
+            ``[first, last, first, last, ...]`` (empty where not matched): a held pose, or a
+            scene the episode shows twice, is equally well any of them.
+    """
+
+    gt_index: Array
+    confidence: Array
+    ties: list[list[int]]
+
+    @property
+    def matched(self) -> npt.NDArray[np.bool_]:
+        return np.isfinite(self.gt_index)
+
+    def to_json(self) -> FrameMatchJson:
+        return {"gt_index": _floats(self.gt_index, 1), "confidence": _floats(self.confidence, 4),
+                "ties": self.ties}
+
+    @classmethod
+    def from_json(cls, data: FrameMatchJson) -> FrameMatch:
+        gt_index, confidence = _array(data["gt_index"]), _array(data["confidence"])
+        ties = [[int(i) for i in runs] for runs in data["ties"]]
+        if not (gt_index.shape == confidence.shape and len(ties) == gt_index.size
+                and all(len(runs) % 2 == 0 for runs in ties)):
+            raise ValueError("frame match: gt_index, confidence and ties do not describe the same frames")
+        return cls(gt_index, confidence, ties)
+
+    def reindexed(self, index_of_position: npt.ArrayLike) -> FrameMatch:
+        """The same match with GT positions (0, 1, ... among the frames read) turned into clip
+        indexes (a clip's numbering may have gaps)."""
+        index = np.asarray(index_of_position, np.float64)
+        if index.size == 0:
+            return self
+        gt_index = self.gt_index.copy()
+        ok = self.matched
+        gt_index[ok] = np.interp(gt_index[ok], np.arange(index.size), index)
+        ties = [[int(index[i]) for i in runs] for runs in self.ties]
+        return FrameMatch(gt_index, self.confidence, ties)
+
+
+def _floats(a: Array, digits: int) -> list[float | None]:
+    return [round(float(v), digits) if np.isfinite(v) else None for v in a]
+
+
+def _array(values: list[float | None]) -> Array:
+    return np.array([np.nan if v is None else v for v in values], dtype=np.float64).reshape(-1)
+
+
+def match_frames(imagined: npt.NDArray[np.float32], gt: npt.NDArray[np.float32]) -> FrameMatch:
+    """Match every imagined thumbnail to the GT thumbnails, all pairs at once.
+
+    Args:
+        imagined: (F, D) thumbnails (:func:`thumbnail`).
+        gt: (G, D) thumbnails of the GT clip, in clip order.
+    """
+    n = imagined.shape[0]
+    if gt.shape[0] == 0 or n == 0:
+        return FrameMatch(np.full(n, np.nan), np.full(n, np.nan), [[] for _ in range(n)])
+    scores = imagined @ gt.T  # (F, G) correlations
+    best = scores.argmax(axis=1)
+    rows = np.arange(n)
+    top = scores[rows, best]
+    confidence = (top - np.median(scores, axis=1)).astype(np.float64)
+    ok = (confidence >= MIN_CONFIDENCE) & (top >= MIN_CORRELATION)
+    near = scores >= (top - TIE_FRACTION * confidence)[:, None]
+    # runs of tied frames: edges where ``near`` switches, per row
+    padded = np.zeros((n, scores.shape[1] + 2), bool)
+    padded[:, 1:-1] = near
+    gt_index = np.full(n, np.nan)
+    ties: list[list[int]] = []
+    for f in range(n):
+        if not ok[f]:
+            ties.append([])
+            continue
+        edges = np.flatnonzero(padded[f, 1:] != padded[f, :-1])  # starts and one-past-ends
+        first, stop = edges[0::2], edges[1::2]
+        runs = np.stack([first, stop - 1], axis=1)
+        holding = runs[(runs[:, 0] <= best[f]) & (best[f] <= runs[:, 1])][0]
+        gt_index[f] = holding.mean()
+        ties.append([int(i) for i in runs.ravel()])
+    return FrameMatch(gt_index, confidence, ties)
+
+
+class ViewAgreementJson(TypedDict):
+    """One view's entry of a report row's ``video_action``."""
+
+    lag_s_median: float | None
+    lag_s_abs_mean: float | None
+    matched_fraction: float
+    split_chunk: int | None
+    video_tempo: float | None
+    note: str | None
+
+
+@dataclass
+class VideoAction:
+    """One view's agreement over the rollout, per imagined frame.
+
+    Attributes:
+        view: the camera.
+        frame_step: (F,) the executed step each imagined frame shows.
+        frame_chunk: (F,) its chunk.
+        video_gt_s: (F,) the video's GT time [s since the start frame]; NaN: no match.
+        confidence: (F,) the match's confidence (NaN: no GT frame).
+        joints_gt_s: (F,) the joints' GT time at the frame's step [s], or None without GT joints.
+        fps: steps per second.
+    """
+
+    view: str
+    frame_step: npt.NDArray[np.int64]
+    frame_chunk: npt.NDArray[np.int64]
+    video_gt_s: Array
+    confidence: Array
+    joints_gt_s: Array | None
+    fps: float
+
+    @property
+    def lag_s(self) -> Array | None:
+        """(F,) video GT time - joints GT time [s]; NaN where the frame has no match."""
+        return None if self.joints_gt_s is None else self.video_gt_s - self.joints_gt_s
+
+    @property
+    def matched_fraction(self) -> float:
+        return float(np.isfinite(self.video_gt_s).mean()) if self.video_gt_s.size else 0.0
+
+    def split_chunk(self) -> int | None:
+        """The first chunk from which on |lag| (the median of each chunk's matched frames) stays
+        above :data:`SPLIT_LAG_S`: it is above there and in at least :data:`SPLIT_SHARE` of the
+        measured chunks after it (a held pose, where no shift can show, does not end it; chunks
+        without a matched frame are not measured)."""
+        lag = self.lag_s
+        if lag is None:
+            return None
+        above = []
+        for chunk in np.unique(self.frame_chunk):
+            values = np.abs(lag[(self.frame_chunk == chunk) & np.isfinite(lag)])
+            if values.size:
+                above.append((int(chunk), bool(np.median(values) > SPLIT_LAG_S)))
+        flags = np.array([a for _, a in above], dtype=np.float64)
+        # share of measured chunks above, from each chunk to the end
+        share = np.cumsum(flags[::-1])[::-1] / np.arange(len(flags), 0, -1) if len(flags) else flags
+        for (chunk, is_above), s in zip(above, share):
+            if is_above and s >= SPLIT_SHARE:
+                return chunk
+        return None
+
+    def video_tempo(self) -> float | None:
+        """Slope of the video's GT time against rollout time (1: the real episode's speed)."""
+        ok = np.isfinite(self.video_gt_s)
+        if ok.sum() < 2 or np.unique(self.frame_step[ok]).size < 2:
+            return None
+        n_steps = int(self.frame_step.max()) + 1
+        index = np.zeros(n_steps)
+        valid = np.zeros(n_steps, bool)
+        index[self.frame_step[ok]] = self.video_gt_s[ok] * self.fps  # GT time in steps
+        valid[self.frame_step[ok]] = True
+        value = float(metrics.tempo(index, valid))
+        return value if np.isfinite(value) else None
+
+    def summary(self) -> ViewAgreementJson:
+        """The view's ``video_action`` entry of a report row (a null says why in ``note``)."""
+        lag = self.lag_s
+        matched = lag[np.isfinite(lag)] if lag is not None else np.empty(0)
+        note = None
+        if not np.isfinite(self.video_gt_s).any():
+            note = "no match: no imagined frame resembles one GT frame more than the others"
+        elif lag is None:
+            note = "no GT joints: lag not measured"
+        elif not matched.size:
+            note = f"no lag: the predicted joints are more than {JOINT_MATCH_MAX:g} from every GT pose where the video matched"
+        return {
+            "lag_s_median": round(float(np.median(matched)), 4) if matched.size else None,
+            "lag_s_abs_mean": round(float(np.abs(matched).mean()), 4) if matched.size else None,
+            "matched_fraction": round(self.matched_fraction, 4),
+            "split_chunk": self.split_chunk(),
+            "video_tempo": _rounded(self.video_tempo()),
+            "note": note,
+        }
+
+
+def _rounded(value: float | None) -> float | None:
+    return None if value is None else round(value, 4)
+
+
+@dataclass
+class JointTimes:
+    """Where the predicted joints are on the GT episode (from the timeline's best match).
+
+    Attributes:
+        pred: (T, 6) executed predicted joints.
+        gt: (G, 6) GT joints.
+        offset: index in ``gt`` of rollout step 0.
+        best_index: (T,) the best-match argmin (index in ``gt``).
+        best_drift: (T,) its distance.
+    """
+
+    pred: Array
+    gt: Array
+    offset: int
+    best_index: npt.NDArray[np.int64]
+    best_drift: Array
+
+    def tied_steps(self, step: int) -> Array:
+        """The middles of the runs of GT steps (since the start frame) whose pose is as near to
+        ``step``'s as the best match: one per time the episode holds that pose."""
+        distance = np.linalg.norm(self.gt - self.pred[step], axis=1)
+        tied = np.flatnonzero(distance <= self.best_drift[step] + JOINT_TIE)
+        if tied.size == 0:
+            return np.empty(0)
+        breaks = np.flatnonzero(np.diff(tied) > 1)
+        first = np.concatenate([tied[:1], tied[breaks + 1]])
+        last = np.concatenate([tied[breaks], tied[-1:]])
+        return (first + last) / 2.0 - self.offset
+
+
+def agreement(view: str, match: FrameMatch, frame_step: npt.NDArray[np.int64], steps_per_chunk: int,
+              fps: float, gt_step_of_index: Array, joints: JointTimes | None) -> VideoAction:
+    """One view's agreement from its frame match and the joints' best match.
+
+    Where either side is ambiguous (its best match ties with GT frames at other times: a pose or a
+    scene the episode shows twice), each tied run counts by its middle and the two GT times are
+    the runs' nearest to each other, so an ambiguity never reads as a lag.
+
+    Args:
+        view: the camera.
+        match: the view's frame match.
+        frame_step: (F,) the executed step each imagined frame shows.
+        steps_per_chunk: steps each chunk covers.
+        fps: steps per second.
+        gt_step_of_index: (G,) the rollout step (since the start frame) each GT clip frame shows.
+        joints: where the predicted joints are on the episode, or None without GT joints.
+    """
+    n = match.gt_index.size
+    video_step = np.full(n, np.nan)
+    joints_step = None if joints is None else (joints.best_index[np.minimum(frame_step, len(joints.best_index) - 1)]
+                                               - joints.offset).astype(np.float64)
+    steps_of = np.asarray(gt_step_of_index, np.float64)
+    if joints is not None and joints_step is not None:
+        off_path = joints.best_drift[np.minimum(frame_step, len(joints.best_drift) - 1)] > JOINT_MATCH_MAX
+        joints_step[off_path] = np.nan
+    for f in np.flatnonzero(match.matched) if steps_of.size else []:
+        best = float(np.interp(match.gt_index[f], np.arange(steps_of.size), steps_of))
+        video_step[f] = best
+        if joints_step is None or joints is None or not np.isfinite(joints_step[f]):
+            continue
+        runs = steps_of[np.clip(np.reshape(match.ties[f], (-1, 2)), 0, steps_of.size - 1)]  # (r, 2) in steps
+        tied = joints.tied_steps(int(min(frame_step[f], len(joints.pred) - 1)))
+        if runs.size == 0 or tied.size == 0:
+            continue
+        # one time per run on each side (its middle), and the pair of them nearest to each other
+        middles = runs.mean(axis=1)
+        gap = np.abs(middles[None, :] - tied[:, None])  # (k, r)
+        k, r = np.unravel_index(int(np.argmin(gap)), gap.shape)
+        video_step[f], joints_step[f] = middles[r], tied[k]
+    return VideoAction(view, frame_step, frame_step // max(1, steps_per_chunk), video_step / fps,
+                       match.confidence, None if joints_step is None else joints_step / fps, fps)

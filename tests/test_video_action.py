@@ -1,0 +1,192 @@
+"""Video-action agreement: the imagined video's GT time against the predicted joints' GT time."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from inspector.analysis import video_action
+from inspector.analysis.timeline import build_timeline
+from inspector.data.session import SessionWriter, open_session
+
+FPS = 30.0
+EXECUTED, HORIZON = 9, 12
+N_STEPS = 90  # 10 chunks
+
+
+def _scene(t: np.ndarray, size=(96, 72)) -> np.ndarray:
+    """(len(t), H, W, 3) frames of a lit disc on a fixed textured backdrop, moving along a path
+    that never passes the same point twice (a stand-in for the arm)."""
+    w, h = size
+    rng = np.random.default_rng(5)
+    backdrop = (40 + 30 * rng.random((h // 8, w // 8))).repeat(8, 0).repeat(8, 1)
+    yy, xx = np.mgrid[0:h, 0:w]
+    frames = []
+    for ti in t:
+        u = ti / 120.0  # 0..1 over the clip
+        cx, cy = 12 + 70 * u, 36 + 22 * np.sin(2.5 * np.pi * u)
+        disc = np.exp(-((xx - cx) ** 2 + (yy - cy) ** 2) / (2 * 6.0 ** 2))
+        gray = backdrop + 200 * disc
+        frames.append(np.stack([gray, 0.8 * gray, 0.6 * gray], axis=-1))
+    return np.clip(frames, 0, 255).astype(np.uint8)
+
+
+def _joints(t: np.ndarray) -> np.ndarray:
+    """(len(t), 6) GT joints [deg], every time its own pose."""
+    u = np.asarray(t, np.float64)[:, None] / 120.0
+    return np.hstack([-40 + 80 * u, 10 * np.sin(3 * u), 20 + 30 * u, 5 * np.cos(2 * u), 0 * u, 30 + 0 * u])
+
+
+def _write(root: Path, shows: np.ndarray, gt_frames: np.ndarray, gt_joints: np.ndarray) -> None:
+    """A session with one autoregressive rollout following the GT joints, whose imagined frame f
+    shows GT frame ``shows[f]``; GT joints and frames carried with it."""
+    n_chunks = N_STEPS // EXECUTED
+    steps = np.minimum(np.arange(n_chunks)[:, None] * EXECUTED + np.arange(HORIZON), len(gt_joints) - 1)
+    with SessionWriter.create(root) as w:
+        w.add_rollout("r", kind="autoregressive", actions=gt_joints[steps], fps=FPS,
+                      executed_per_chunk=EXECUTED, frames_per_chunk=EXECUTED,
+                      videos={"front": gt_frames[shows]}, gt_actions=gt_joints, gt_videos={"front": gt_frames})
+
+
+@pytest.mark.parametrize("shift", [6, -4, 0])
+def test_a_clip_shifted_by_n_frames_reads_n_over_fps(tmp_path: Path, shift: int) -> None:
+    n_gt = N_STEPS + 12
+    times = np.arange(n_gt, dtype=np.float64)
+    gt_frames, gt_joints = _scene(times), _joints(times)
+    shows = np.clip(np.arange(N_STEPS) + shift, 0, n_gt - 1)
+    _write(tmp_path / "s", shows, gt_frames, gt_joints)
+
+    tl = build_timeline(open_session(tmp_path / "s").rollouts["r"])
+    va = tl.video_action("front")
+    assert va is not None and va.lag_s is not None
+    confident = np.isfinite(va.lag_s)
+    assert confident.mean() > 0.9
+    inside = confident & (np.arange(N_STEPS) + shift >= 0)  # frames that show a real GT frame
+    # every confident frame reads the shift within one frame
+    np.testing.assert_allclose(va.lag_s[inside], shift / FPS, atol=1.0 / FPS + 1e-9)
+    summary = va.summary()
+    assert summary["lag_s_median"] == pytest.approx(shift / FPS, abs=0.5 / FPS)
+    assert summary["video_tempo"] == pytest.approx(1.0, abs=0.05)
+    # the split: from the first chunk on, when the video runs 0.5 s or more away from the actions
+    assert summary["split_chunk"] is None
+
+
+def test_a_video_far_ahead_splits_from_its_first_chunk(tmp_path: Path) -> None:
+    n_gt = N_STEPS + 30
+    times = np.arange(n_gt, dtype=np.float64)
+    gt_frames, gt_joints = _scene(times), _joints(times)
+    _write(tmp_path / "s", np.arange(N_STEPS) + 24, gt_frames, gt_joints)  # 0.8 s ahead
+    va = build_timeline(open_session(tmp_path / "s").rollouts["r"]).video_action("front")
+    assert va is not None
+    assert va.summary()["lag_s_median"] == pytest.approx(0.8, abs=1.0 / FPS)
+    assert va.summary()["split_chunk"] == 0
+
+
+def test_a_still_clip_reads_no_match(tmp_path: Path) -> None:
+    still = np.repeat(_scene(np.array([40.0])), N_STEPS, axis=0)
+    _write(tmp_path / "s", np.arange(N_STEPS), still, _joints(np.arange(N_STEPS, dtype=np.float64)))
+    va = build_timeline(open_session(tmp_path / "s").rollouts["r"]).video_action("front")
+    assert va is not None
+    summary = va.summary()
+    assert summary["matched_fraction"] == 0.0
+    assert summary["lag_s_median"] is None and summary["lag_s_abs_mean"] is None
+    assert summary["video_tempo"] is None
+    assert summary["note"] is not None and summary["note"].startswith("no match")
+
+
+def test_a_frame_unlike_any_gt_frame_matches_nothing() -> None:
+    rng = np.random.default_rng(0)
+    gt = np.stack([video_action.thumbnail(f) for f in _scene(np.arange(60.0))])
+    noise = np.stack([video_action.thumbnail(rng.integers(0, 255, (72, 96, 3), dtype=np.uint8)) for _ in range(5)])
+    flat = np.stack([video_action.thumbnail(np.full((72, 96, 3), 128, np.uint8))])
+    match = video_action.match_frames(np.vstack([noise, flat, gt[10:11]]), gt)
+    assert not match.matched[:6].any()
+    assert match.gt_index[6] == 10
+
+
+def test_frame_match_round_trips_through_json() -> None:
+    gt = np.stack([video_action.thumbnail(f) for f in _scene(np.arange(30.0))])
+    match = video_action.match_frames(gt[::3], gt).reindexed(np.arange(30) * 2)
+    again = video_action.FrameMatch.from_json(match.to_json())
+    np.testing.assert_allclose(again.gt_index, match.gt_index)
+    assert again.ties == match.ties
+    with pytest.raises(ValueError):
+        video_action.FrameMatch.from_json({**match.to_json(), "ties": []})
+
+
+def test_the_recording_holds_both_gt_times_the_lag_and_the_split(tmp_path: Path) -> None:
+    from test_export import Recording, rrd_verify
+
+    from inspector.export import layout as L
+    from inspector.export.recording import write_recording
+
+    n_gt = N_STEPS + 30
+    times = np.arange(n_gt, dtype=np.float64)
+    _write(tmp_path / "s", np.arange(N_STEPS) + 24, _scene(times), _joints(times))
+    tl = build_timeline(open_session(tmp_path / "s").rollouts["r"])
+    path = write_recording(tl, tmp_path / "r.rrd")
+    rrd_verify(path)
+    rec = Recording(path)
+    va = tl.video_action("front")
+    assert va is not None and va.lag_s is not None and va.joints_gt_s is not None
+    frames, lag = rec.scalars(L.lag_path("front"), order_by=L.FRAME)
+    np.testing.assert_allclose(lag, va.lag_s[frames])
+    assert len(lag) == np.isfinite(va.lag_s).sum() > 0
+    _, video = rec.scalars(L.gt_time_path("front", "video"), order_by=L.FRAME)
+    _, joints = rec.scalars(L.gt_time_path("front", "joints"), order_by=L.FRAME)
+    np.testing.assert_allclose(video, va.video_gt_s[np.isfinite(va.video_gt_s)])
+    np.testing.assert_allclose(joints, va.joints_gt_s[np.isfinite(va.joints_gt_s)])
+    split_frames, _ = rec.scalars(L.gt_time_path("front", "split"), order_by=L.FRAME)
+    assert list(split_frames) == [0]  # 0.8 s ahead from the start: parted from chunk 0
+
+
+def test_the_app_plots_both_gt_times_marks_the_split_and_reads_the_lag(tmp_path: Path) -> None:
+    import time
+
+    from test_app import connect, key
+
+    from inspector.app import serve
+
+    n_gt = N_STEPS + 30
+    times = np.arange(n_gt, dtype=np.float64)
+    _write(tmp_path / "s", np.arange(N_STEPS) + 24, _scene(times), _joints(times))  # 0.8 s ahead
+    app = serve([tmp_path / "s"], port=0, block=False)
+    try:
+        client, tab = connect(app)
+        with client:
+            assert tab.open(key(app, "r"))
+            assert tab.loaded.frames.done.wait(120)
+            deadline = time.monotonic() + 60
+            while "front" not in tab.plots.agreements:  # the plots follow the frames' callback
+                assert time.monotonic() < deadline, "no agreement after the video metrics"
+                time.sleep(0.05)
+            plot = tab.plots.agreement_plot
+            assert plot is not None
+            labels = [s["label"] for s in plot.handle.series]
+            assert "video's GT time, front" in labels and "joints' GT time" in labels
+            assert "front: video and actions part (chunk 0)" in labels
+            tab.set_step(40, force=True)
+            import re
+
+            read = re.search(r"lag front ([+-][\d.]+) s", tab.controls.readout.content)
+            assert read is not None and float(read.group(1)) == pytest.approx(0.8, abs=1.0 / FPS)
+    finally:
+        app.stop()
+
+
+def test_the_overview_table_has_a_median_lag_column() -> None:
+    from inspector.app._overview_rows import OverviewRow
+    from inspector.app._overview_table import Query, select_rows, table_html
+
+    summary = {"tag": "r", "session": "s", "kind": "autoregressive", "prompt": "pick", "episode_index": 0,
+               "start_frame": 0, "rmse_deg": None, "per_step_mse": None, "chunk_joints": None, "n_chunks": 3,
+               "steps_per_chunk": 9, "episode_length": None, "time_aligned_drift": None, "best_match_drift": None,
+               "tempo": None, "ee_error_mm": None, "post_episode_chunks": 0, "limit_violations": {"steps": 0},
+               "video_psnr_db": {"front": 18.0},
+               "video_action": {"front": {"lag_s_median": 0.8, "lag_s_abs_mean": 0.8, "matched_fraction": 1.0,
+                                          "split_chunk": 0, "video_tempo": 1.0, "note": None}}}
+    rows = [OverviewRow("s / r", "s", "r", "autoregressive", "pick", Path("/nowhere"), summary, None)]
+    html = table_html(rows, select_rows(rows, Query(), {}), {})
+    assert ">lag front<" in html and ">+0.80<" in html
