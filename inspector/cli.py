@@ -37,7 +37,7 @@ import sys
 import threading
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from .cache import DEFAULT_FRAME_CACHE_MB
 from .errors import InspectorError
@@ -341,6 +341,17 @@ def _resolve(host: str, port: int) -> tuple[int, tuple] | OSError:
     return family, address
 
 
+def _import_parser(formats: Any, name: str, what: str, src_help: str,
+                   func: Callable[[argparse.Namespace], int]) -> argparse.ArgumentParser:
+    """``inspector import NAME SRC -o DEST [--overwrite]``: what every format takes."""
+    p = formats.add_parser(name, help=what)
+    p.add_argument("src", help=src_help)
+    p.add_argument("-o", "--output", required=True, help="session directory to create")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing session")
+    p.set_defaults(func=func)
+    return p
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _OneLineParser(
         prog="inspector",
@@ -350,33 +361,21 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("import", help="import model outputs into a native session")
     fmt = p.add_subparsers(dest="format", required=True)
-    dz = fmt.add_parser("dreamzero-so101", help="DreamZero-SO101 evaluation directories")
-    dz.add_argument("src", help="a rollout directory or a parent of several (searched recursively)")
-    dz.add_argument("-o", "--output", required=True, help="session directory to create")
+    dz = _import_parser(fmt, "dreamzero-so101", "DreamZero-SO101 evaluation directories",
+                        "a rollout directory or a parent of several (searched recursively)", _cmd_import)
     dz.add_argument("--dataset", help="LeRobot dataset (root or org/name in the HF cache) with the GT episode")
     dz.add_argument("--episode", type=_index, help="GT episode index (default: the rollout's own)")
-    dz.add_argument("--overwrite", action="store_true", help="replace an existing session")
-    dz.set_defaults(func=_cmd_import)
-    gd = fmt.add_parser("groot-dreams", help="a GR00T-Dreams (DreamGen) IDM_dump output: neural trajectories")
-    gd.add_argument("src", help="the dump's directory (meta/, data/, videos/)")
-    gd.add_argument("-o", "--output", required=True, help="session directory to create")
-    gd.add_argument("--overwrite", action="store_true", help="replace an existing session")
+    gd = _import_parser(fmt, "groot-dreams", "a GR00T-Dreams (DreamGen) IDM_dump output: neural trajectories",
+                        "the dump's directory (meta/, data/, videos/)", _cmd_import)
     _calibration_argument(gd)
-    gd.set_defaults(func=_cmd_import)
-    off = fmt.add_parser("dreamzero-offline", help="DreamZero-SO101 offline_inference.py runs (predicted_actions.csv)")
-    off.add_argument("src", help="a run directory or a parent of several (searched recursively)")
-    off.add_argument("-o", "--output", required=True, help="session directory to create")
+    off = _import_parser(fmt, "dreamzero-offline", "DreamZero-SO101 offline_inference.py runs (predicted_actions.csv)",
+                         "a run directory or a parent of several (searched recursively)", _cmd_import_offline)
     off.add_argument("--dataset", help="LeRobot dataset with the GT episode (default: the runs' inspector_gt.json)")
     off.add_argument("--episode", type=_index, help="GT episode index (default: inspector_gt.json's)")
     off.add_argument("--start-frame", type=_index, help="episode frame the run started at (default: inspector_gt.json's, else 0)")
     off.add_argument("--fps", type=_positive_float, help="action rate [Hz] (default: the dataset's, else 30)")
-    off.add_argument("--overwrite", action="store_true", help="replace an existing session")
-    off.set_defaults(func=_cmd_import_offline)
-    ev = fmt.add_parser("lerobot-eval", help="a lerobot-eval output directory (eval_info.json, videos/, recordings/)")
-    ev.add_argument("src", help="the evaluation's output directory")
-    ev.add_argument("-o", "--output", required=True, help="session directory to create")
-    ev.add_argument("--overwrite", action="store_true", help="replace an existing session")
-    ev.set_defaults(func=_cmd_import_eval)
+    _import_parser(fmt, "lerobot-eval", "a lerobot-eval output directory (eval_info.json, videos/, recordings/)",
+                   "the evaluation's output directory", _cmd_import_eval)
 
     p = sub.add_parser("info", help="describe a session, a LeRobot dataset or a GR00T-Dreams dump")
     p.add_argument("path")

@@ -669,7 +669,7 @@ class LeRobotDataset:
     def _load_episodes_v21(self) -> list[EpisodeInfo]:
         f = self.root / V21_EPISODES_PATH
         infos: list[EpisodeInfo] = []
-        for line_no, row in _read_jsonl(f):
+        for line_no, row in read_jsonl(f):
             ep, length = row.get(EPISODE_INDEX_KEY), row.get(EP_LENGTH)
             if not (_is_whole(ep) and _is_whole(length)):
                 raise InspectorError(f, f"line {line_no}: needs integer '{EPISODE_INDEX_KEY}' and "
@@ -710,7 +710,7 @@ class LeRobotDataset:
     def _load_tasks_v21(self) -> list[str]:
         f = self.root / V21_TASKS_PATH
         pairs = []
-        for line_no, row in _read_jsonl(f):
+        for line_no, row in read_jsonl(f):
             try:
                 pairs.append((int(row[TASK_INDEX_KEY]), str(row["task"])))
             except (KeyError, TypeError, ValueError, OverflowError):
@@ -841,7 +841,7 @@ def _fixed_width(column: Any, width: int, file: Path, key: str) -> npt.NDArray[n
     return flat.reshape(len(col), width)
 
 
-def _read_jsonl(f: Path) -> list[tuple[int, dict[str, Any]]]:
+def read_jsonl(f: Path) -> list[tuple[int, dict[str, Any]]]:
     """(line number, object) for every non-empty line of a JSON-lines file."""
     if not f.is_file():
         raise InspectorError(f, "file not found")

@@ -52,6 +52,7 @@ from ..lerobot_dataset import (
     V21_DEFAULT_VIDEO_PATH,
     EpisodeInfo,
     VideoSegment,
+    read_jsonl,
 )
 from ..session import ABSURD_VALUE, ArrayValue, Rollout, Session, SessionWriter, read_json_object
 from ..video import VideoClip, probe
@@ -246,7 +247,7 @@ class NeuralTrajectories:
         if not f.is_file():
             return {}
         out = {}
-        for line_no, row in _read_jsonl(f):
+        for line_no, row in read_jsonl(f):
             index: Any = row.get("task_index")
             task: Any = row.get("task")
             require(isinstance(index, int) and not isinstance(index, bool) and isinstance(task, str), f,
@@ -259,7 +260,7 @@ class NeuralTrajectories:
         f = self.root / EPISODES_PATH
         dreams = {t.removeprefix(DREAM_PREFIX) for t in self.tasks.values() if t.startswith(DREAM_PREFIX)}
         out: dict[int, EpisodeInfo] = {}
-        for line_no, row in _read_jsonl(f):
+        for line_no, row in read_jsonl(f):
             index: Any = row.get("episode_index")
             length: Any = row.get("length")
             tasks: Any = row.get("tasks", [])
@@ -595,26 +596,6 @@ def import_groot_dreams(src: str | Path, dest: str | Path, *, calibration: str |
 
 # ----------------------------------------------------------------------------------------------
 # helpers
-
-
-def _read_jsonl(f: Path) -> list[tuple[int, dict[str, Any]]]:
-    if not f.is_file():
-        raise InspectorError(f, "file not found")
-    try:
-        text = f.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InspectorError(f, f"cannot read ({exc})") from None
-    rows = []
-    for line_no, line in enumerate(text.splitlines(), start=1):
-        if not line.strip():
-            continue
-        try:
-            row = json.loads(line)
-        except (ValueError, RecursionError) as exc:
-            raise InspectorError(f, f"line {line_no}: invalid JSON ({exc})") from None
-        require(isinstance(row, dict), f, f"line {line_no}: expected a JSON object")
-        rows.append((line_no, row))
-    return rows
 
 
 def _read_table(f: Path, columns: list[str]) -> Any:
