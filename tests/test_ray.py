@@ -196,7 +196,7 @@ def test_ray_workers_honour_the_metrics_cache(local_ray, tmp_path):
 
 
 def test_export_on_ray_writes_what_the_local_export_writes(local_ray, broken_demo, tmp_path, capsys):
-    for tag in ("tempo_0.8x", "limits_wrist", "overrun_60chunks", "prompt_train", "prompt_novel"):
+    for tag in ("tempo_0.8x", "limits_wrist", "overrun_60chunks", "prompt_train", "prompt_novel", "video_ahead_1s"):
         shutil.rmtree(broken_demo / "rollouts" / tag)  # keep it short: bias_elbow (broken), single_f0*
     local_out, ray_out = tmp_path / "local", tmp_path / "ray"
     assert export_cli(broken_demo, local_out, use_cache=False) == 2

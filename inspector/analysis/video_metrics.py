@@ -18,6 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..data.video import ForwardReader, VideoClip
+from ..errors import InspectorError
 from . import metrics
 from .video_action import FrameMatch, FrameMatchJson, match_frames, thumbnail
 
@@ -128,9 +129,15 @@ def compare_clips(view: str, imagined: Sequence[VideoClip], gt: VideoClip | None
             _set(psnr[b], f, np.nan if gt_rgb is None else float(metrics.psnr(rgb[None], gt_rgb[None])[0]))
             if with_ssim:
                 _set(ssim[b], f, np.nan if gt_rgb is None else float(metrics.ssim(rgb[None], gt_rgb[None])[0]))
+    matchable = gt_stream is not None
     if gt_stream is not None:
-        gt_stream.drain()  # every GT frame is a candidate match (and is shown), paired or not
-    matches = [_match(t, gt_thumbs) if gt_stream is not None else None for t in thumbs]
+        try:
+            gt_stream.drain()  # every GT frame is a candidate match (and is shown), paired or not
+        except InspectorError:
+            # past the frames PSNR pairs with, the GT clip cannot be decoded: the PSNR stands, and
+            # with candidates missing, a match would be a guess, so there is none
+            matchable = False
+    matches = [_match(t, gt_thumbs) if matchable else None for t in thumbs]
     return [VideoMetrics(view, np.array(p, dtype=np.float64), np.array(q, dtype=np.float64) if with_ssim else None, m)
             for p, q, m in zip(psnr, ssim, matches)]
 

@@ -41,13 +41,24 @@ def read_entry(cache: MetricsCache, key: str) -> CachedMetrics:
     entry = cast(MetricsEntry | None, cache.get(key, MetricsEntry))
     if entry is None:
         return CachedMetrics()
+    if not is_consistent(entry):
+        return CachedMetrics()
     video = entry["video"]
-    for view, record in video.items():
-        ssim = record["ssim"]
-        if record["view"] != view or (ssim is not None and len(ssim) != len(record["psnr_db"])):
-            return CachedMetrics()
     return CachedMetrics(cast(dict[str, Any] | None, entry["row"]),
                          {view: VideoMetrics.from_json(record) for view, record in video.items()})
+
+
+def is_consistent(entry: MetricsEntry) -> bool:
+    """What the entry's type cannot say: each view's record is its own, and its per-frame series
+    (SSIM beside PSNR; the frame match's GT index, confidence and tied runs) are of one length."""
+    for view, record in entry["video"].items():
+        ssim, match = record["ssim"], record["match"]
+        if record["view"] != view or (ssim is not None and len(ssim) != len(record["psnr_db"])):
+            return False
+        if match is not None and not (len(match["gt_index"]) == len(match["confidence"]) == len(match["ties"])
+                                      and all(len(runs) % 2 == 0 for runs in match["ties"])):
+            return False
+    return True
 
 
 def write_entry(cache: MetricsCache, key: str, row: Mapping[str, Any] | None,
