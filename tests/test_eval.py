@@ -206,11 +206,18 @@ def test_resume_requests_only_what_is_missing(dataset: Path, tmp_path: Path) -> 
     assert sorted(open_session(out).rollouts) == ["ep000_f0000", "ep000_f0036", "ep001_f0000", "ep001_f0021"]
 
 
+def _ctrl_c_as_at_a_terminal() -> None:
+    """In the child: SIGINT as a terminal delivers it. A suite started in the background by a
+    shell without job control inherits SIGINT ignored, and Python then installs no handler for it."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_an_interrupted_run_keeps_every_finished_sample(dataset: Path, tmp_path: Path) -> None:
     out = tmp_path / "run"
     with policy_server(delay_s=0.4) as server:
         proc = subprocess.Popen([sys.executable, "-m", "inspector", "eval", server.url, str(dataset), "-o", str(out),
-                                 "--samples", "5"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                                 "--samples", "5"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                preexec_fn=_ctrl_c_as_at_a_terminal)
         deadline = time.monotonic() + DEADLINE_S
         while time.monotonic() < deadline and len(list((out / "rollouts").glob("ep*"))) < 2:
             time.sleep(0.05)
