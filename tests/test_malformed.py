@@ -880,7 +880,7 @@ def test_app_catalog_broken_rollouts_are_errors(ws: Workspace, tmp_path: Path) -
                 catalog.load("ds / r0")
             # the corrupt video fails alone: the rollout opens, that view carries the error
             loaded = catalog.load("zs1 / f084")
-            assert loaded.frames.done.wait(60)
+            assert loaded.frames.decoded.wait(60)  # every view settled: shown, or its error
             assert "front.mp4" in loaded.frames.status["front"] and "\n" not in loaded.frames.status["front"]
             assert loaded.frames.status["gripper"] == READY and loaded.frames.status["top"] == READY
             assert catalog.load("zs3 / f000").timeline.has_gt_joints

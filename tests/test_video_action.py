@@ -176,6 +176,60 @@ def test_the_app_plots_both_gt_times_marks_the_split_and_reads_the_lag(tmp_path:
         app.stop()
 
 
+def test_the_app_shows_frames_before_matching_them_and_matches_only_what_a_tab_shows(tmp_path: Path) -> None:
+    """The frame match costs a third of a fill: the app's frames come first, the match after
+    (the same numbers the report computes), and only for a rollout a tab shows."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    from inspector.analysis.video_metrics import compare_clips
+    from inspector.app._frames import READY, FrameCache, FrameStore
+
+    n_gt = N_STEPS + 30
+    times = np.arange(n_gt, dtype=np.float64)
+    _write(tmp_path / "s", np.arange(N_STEPS) + 24, _scene(times), _joints(times))
+    tl = build_timeline(open_session(tmp_path / "s").rollouts["r"])
+    gate = threading.Event()
+    stored: list = []
+
+    class GatedMatcher(ThreadPoolExecutor):
+        """Runs matches only once the test opens the gate, counting what it was given."""
+
+        submitted: list = []
+
+        def submit(self, fn, /, *args, **kwargs):  # type: ignore[override]
+            self.submitted.append(args)
+            return super().submit(lambda: (gate.wait(60), fn(*args, **kwargs)))
+
+    decoder, matcher = ThreadPoolExecutor(2), GatedMatcher(1)
+    try:
+        store = FrameStore(tl, decoder, FrameCache(), stored.append, matcher)
+        store.start()
+        assert store.decoded.wait(60)
+        assert store.status["front"] == READY and store.pair("front", 40).imagined is not None
+        assert store.psnr["front"] is not None  # PSNR comes with the frames
+        assert not store.done.is_set() and "front" not in tl.known_video_metrics()
+        assert matcher.submitted == []  # no tab shows the rollout: nothing to match yet
+
+        changed = threading.Event()
+        store.add_listener(changed.set)  # a tab opens it
+        assert matcher.submitted == [("front",)]
+        assert not store.done.wait(0.5)  # held at the gate: the frames do not wait for it
+        gate.set()
+        assert store.done.wait(60) and changed.is_set()
+        vm = tl.known_video_metrics()["front"]
+        assert vm.match is not None and [v.view for v in stored] == ["front"]
+        # what the app keeps (and stores in the metrics cache) is what the report computes
+        fresh = compare_clips("front", [tl.rollout.video("front")], tl.gt.clips["front"],
+                              tl.gt_index_of_frame("front"))[0]
+        assert vm.to_json() == fresh.to_json() == stored[0].to_json()
+        assert tl.video_action("front").summary()["lag_s_median"] == pytest.approx(0.8, abs=1.0 / FPS)
+    finally:
+        gate.set()
+        decoder.shutdown()
+        matcher.shutdown()
+
+
 def test_the_overview_table_has_a_median_lag_column() -> None:
     from inspector.app._overview_rows import OverviewRow
     from inspector.app._overview_table import Query, select_rows, table_html

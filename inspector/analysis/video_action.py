@@ -16,7 +16,8 @@ Without GT joints the video's GT time still gives the **video's tempo** (its spe
 real episode), as the joints' best match gives theirs.
 
 Thumbnails are taken while the clips stream for PSNR (:mod:`inspector.analysis.video_metrics`), so
-the agreement costs no decoding of its own.
+the report's agreement costs no decoding of its own. The app shows a rollout's frames first and
+streams the clips once more for the match after (a third of a fill would otherwise be thumbnails).
 """
 
 from __future__ import annotations

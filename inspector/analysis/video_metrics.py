@@ -5,7 +5,8 @@ memory, whatever the clips' length or size. Several imagined clips that share on
 of the same dataset episode, from the same start frame) are compared in one pass, so the GT
 is decoded once for all of them. The GT frame is scaled to each imagined clip's size while
 decoding (swscale, area filter), as the metric definition asks. The same pass takes a thumbnail
-of every imagined and every GT frame and matches them (:mod:`inspector.analysis.video_action`).
+of every imagined and every GT frame and matches them (:mod:`inspector.analysis.video_action`),
+unless asked not to (the app's frame fill, which matches after).
 """
 
 from __future__ import annotations
@@ -78,7 +79,7 @@ def _array(values: list) -> Array:
 def compare_clips(view: str, imagined: Sequence[VideoClip], gt: VideoClip | None,
                   gt_index_of: Callable[[int], int], with_ssim: bool = False,
                   on_imagined: Callable[[int, int, Frame], None] | None = None,
-                  on_gt: Callable[[int, Frame], None] | None = None) -> list[VideoMetrics]:
+                  on_gt: Callable[[int, Frame], None] | None = None, match: bool = True) -> list[VideoMetrics]:
     """PSNR (and SSIM) of each imagined clip against the GT frames paired with its frames, and
     the GT frame each imagined frame resembles most (every GT frame of the clip is a candidate).
 
@@ -92,6 +93,8 @@ def compare_clips(view: str, imagined: Sequence[VideoClip], gt: VideoClip | None
         on_imagined: called as ``on_imagined(clip_number, f, rgb)`` for every imagined frame.
         on_gt: called as ``on_gt(index, rgb)`` for every GT frame of the clip, paired or not
             (at the first imagined clip's size).
+        match: also match the frames (False: ``match`` is None, and no thumbnail is taken; the
+            app shows frames first and matches them after, as thumbnails cost a third of a fill).
 
     Raises:
         InspectorError: a clip cannot be decoded (naming it).
@@ -101,11 +104,12 @@ def compare_clips(view: str, imagined: Sequence[VideoClip], gt: VideoClip | None
     thumbs: list[list[np.ndarray | None]] = [[] for _ in streams]
 
     def gt_seen(index: int, rgb: Frame) -> None:
-        gt_thumbs.append((index, thumbnail(rgb)))
+        if match:
+            gt_thumbs.append((index, thumbnail(rgb)))
         if on_gt is not None:
             on_gt(index, rgb)
 
-    gt_stream = ForwardReader(gt, gt_seen) if gt is not None else None
+    gt_stream = ForwardReader(gt, gt_seen if match or on_gt is not None else None) if gt is not None else None
     psnr: list[list[float]] = [[] for _ in streams]
     ssim: list[list[float]] = [[] for _ in streams]
     f = 0
@@ -123,14 +127,14 @@ def compare_clips(view: str, imagined: Sequence[VideoClip], gt: VideoClip | None
             rgb = item[1]
             if on_imagined is not None:
                 on_imagined(b, f, rgb)
-            if gt_stream is not None:
+            if gt_stream is not None and match:
                 _set(thumbs[b], f, thumbnail(rgb))
             gt_rgb = gt_stream.frame_at(target, rgb.shape[1::-1]) if gt_stream is not None and target >= 0 else None
             _set(psnr[b], f, np.nan if gt_rgb is None else float(metrics.psnr(rgb[None], gt_rgb[None])[0]))
             if with_ssim:
                 _set(ssim[b], f, np.nan if gt_rgb is None else float(metrics.ssim(rgb[None], gt_rgb[None])[0]))
-    matchable = gt_stream is not None
-    if gt_stream is not None:
+    matchable = gt_stream is not None and match
+    if gt_stream is not None and (match or on_gt is not None):
         try:
             gt_stream.drain()  # every GT frame is a candidate match (and is shown), paired or not
         except InspectorError:

@@ -78,12 +78,15 @@ class Catalog:
         sources: the opened sessions.
         executor: pool for background video decoding.
         joint_links: joint name -> child link (for limit markers), from the shared robot.
+        matcher: where rollouts' frame matches run, after their frames (default: ``executor``).
     """
 
     def __init__(self, sources: Sources, executor: Executor, joint_links: dict[str, str],
-                 frame_cache: FrameCache | None = None, metrics_cache=None) -> None:
+                 frame_cache: FrameCache | None = None, metrics_cache=None,
+                 matcher: Executor | None = None) -> None:
         self.sources = sources
         self._executor = executor
+        self._matcher = matcher
         self._joint_links = joint_links
         self.frame_cache = frame_cache if frame_cache is not None else FrameCache()
         self.metrics_cache = metrics_cache
@@ -165,7 +168,7 @@ class Catalog:
         except Exception as exc:  # any failure becomes an error card naming the rollout
             what = f"cannot build the timeline ({type(exc).__name__}: {exc})"
             raise InspectorError(Path(rollout.root), what) from exc
-        return Loaded(entry, tl, scene, FrameStore(tl, self._executor, self.frame_cache, remember))
+        return Loaded(entry, tl, scene, FrameStore(tl, self._executor, self.frame_cache, remember, self._matcher))
 
     def _build_episode(self, entry: Entry) -> Loaded:
         ref = entry.episode

@@ -10,6 +10,11 @@ imagined clip and its GT clip together (:func:`inspector.analysis.video_metrics.
 JPEG-encodes every frame as it passes and computes the view's PSNR on the way, so one decode
 serves both. Reopening a recently seen rollout finds its frames in the cache; frames evicted
 since are decoded again in the background. The scrub path only looks frames up.
+
+The frame match of video-action agreement comes after: its thumbnails would add half again to
+the time until the rollout can be scrubbed, so once every view's frames are in, one worker
+computes each view's video metrics as the report does (:meth:`RolloutTimeline.video_metrics`)
+and the agreement plot fills in. A rollout no tab shows any more is not matched until one does.
 """
 
 from __future__ import annotations
@@ -136,10 +141,13 @@ class FrameStore(Notifying):
         cache: the server's frame cache.
         on_video_metrics: called with each view's :class:`~inspector.analysis.video_metrics.VideoMetrics`
             once computed (the app stores them in the metrics cache).
+        matcher: where the frame matches run (default: ``executor``); one worker keeps them from
+            holding up other rollouts' frames.
     """
 
     def __init__(self, timeline: RolloutTimeline, executor: Executor, cache: FrameCache,
-                 on_video_metrics: Callable[[Any], None] | None = None) -> None:
+                 on_video_metrics: Callable[[Any], None] | None = None,
+                 matcher: Executor | None = None) -> None:
         self.timeline = timeline
         imagined = list(timeline.rollout.views)
         self.views: list[str] = imagined + [v for v in timeline.gt.views if v not in imagined]
@@ -151,16 +159,19 @@ class FrameStore(Notifying):
         self.psnr: dict[str, npt.NDArray[np.float64] | None] = {
             v: known[v].psnr_db if v in known else None for v in self.views}
         self._executor = executor
+        self._matcher = matcher if matcher is not None else executor
         self._cache = cache
         self._on_video_metrics = on_video_metrics
         self._lock = threading.Lock()
         self._listeners = Listeners()
         self._filling: set[str] = set()
         self._framed: set[str] = set()  # views whose frames are all in the cache
-        self._finished: set[str] = set()  # ... and whose PSNR is known (or failed, or has none)
+        self._finished: set[str] = set()  # ... and whose video metrics are known (or failed, or has none)
+        self._unmatched: set[str] = set()  # framed, with PSNR, the frame match still to compute
+        self._matching: set[str] = set()  # ... being computed now
         self._sizes: dict[str, tuple[int, int]] = {}
         self.decoded = threading.Event()  # every view's frames are in the cache: ready to scrub
-        self.done = threading.Event()  # ... and every view's PSNR is known (or failed)
+        self.done = threading.Event()  # ... and every view's PSNR and frame match are known (or failed)
         self.token = next(_STORE_TOKENS)  # names this store's entries in the cache (playback clips)
 
     @property
@@ -175,17 +186,21 @@ class FrameStore(Notifying):
     # -- background work ----------------------------------------------------------------------
     def start(self) -> None:
         """Fill the cache with every view's frames. A view whose frames are still cached is ready
-        at once (a recently seen rollout reopens instantly); it is read again only if its PSNR is
+        at once (a recently seen rollout reopens instantly); its video metrics are computed if
         not known yet."""
+        known = self.timeline.known_video_metrics()
         for view in self.views:
             if self._frames_cached(view):
                 self.status[view] = READY
                 if view in self.timeline.gt.clips:
                     self.gt_status[view] = READY
+                if self._compared(view) and view not in known:
+                    with self._lock:
+                        self._unmatched.add(view)  # the match computes the PSNR too
                 self._view_framed(view)
-                if self.psnr.get(view) is not None or not self._compared(view):
+                if view not in self._unmatched:
                     self._view_finished(view)
-                    continue
+                continue
             self._fill(view)
         if not self.views:
             self.decoded.set()
@@ -231,7 +246,7 @@ class FrameStore(Notifying):
         def run(with_gt: bool):
             results = compare_clips(view, imagined_clips, gt_clip if with_gt else None,
                                     tl.gt_index_of_frame(view) if with_gt else (lambda f: -1),
-                                    on_imagined=imagined, on_gt=gt_frame if with_gt else None)
+                                    on_imagined=imagined, on_gt=gt_frame if with_gt else None, match=False)
             return results[0] if results else None
 
         try:
@@ -241,9 +256,9 @@ class FrameStore(Notifying):
                 self.gt_status[view] = READY
             if vm is not None and self._compared(view):
                 self.psnr[view] = vm.psnr_db
-                tl.set_video_metrics(vm)
-                if self._on_video_metrics is not None:
-                    self._on_video_metrics(vm)
+                if view not in tl.known_video_metrics():
+                    with self._lock:
+                        self._unmatched.add(view)
         except InspectorError as exc:
             if gt_clip is not None and exc.file == str(gt_clip.path) and imagined_clips:
                 # a broken GT clip: the imagined frames still show, without their GT
@@ -259,7 +274,45 @@ class FrameStore(Notifying):
             self.status[view] = _one_line(exc)
         with self._lock:
             self._filling.discard(view)
+            unmatched = view in self._unmatched
         self._view_framed(view)
+        if unmatched:
+            self._notify()  # its frames and PSNR show now; the match follows
+        else:
+            self._view_finished(view)
+
+    # -- the frame match, once every view's frames are in -----------------------------------
+    def add_listener(self, fn: Callable[[], None]) -> None:
+        super().add_listener(fn)
+        self._match_unmatched()  # a tab shows the rollout again: finish what was left
+
+    def _match_unmatched(self) -> None:
+        """Queue the frame match of each view that waits for one, once every view's frames are in
+        (they come first) and while a tab shows the rollout."""
+        if not self.decoded.is_set() or not self._listeners:
+            return
+        with self._lock:
+            todo = sorted(self._unmatched - self._matching)
+            self._matching.update(todo)
+        for view in todo:
+            self._matcher.submit(self._match_view, view)
+
+    def _match_view(self, view: str) -> None:
+        """The view's video metrics as the report computes them (PSNR and the frame match)."""
+        if not self._listeners:  # no tab shows the rollout any more: left for when one does
+            with self._lock:
+                self._matching.discard(view)
+            return
+        try:
+            vm = self.timeline.video_metrics(view)
+            self.psnr[view] = vm.psnr_db
+            if self._on_video_metrics is not None:
+                self._on_video_metrics(vm)
+        except Exception:
+            pass  # the frames and the PSNR stand; the agreement plot stays without this view
+        with self._lock:
+            self._matching.discard(view)
+            self._unmatched.discard(view)
         self._view_finished(view)
 
     def _view_framed(self, view: str) -> None:
@@ -267,6 +320,7 @@ class FrameStore(Notifying):
             self._framed.add(view)
             if len(self._framed) == len(self.views):
                 self.decoded.set()
+        self._match_unmatched()
 
     def _view_finished(self, view: str) -> None:
         with self._lock:

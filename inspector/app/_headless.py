@@ -16,7 +16,7 @@ Usage::
     with HeadlessClient(port, observe=True) as client:      # a server started by `inspector serve`
         picker = client.wait_for_control("Rollout")
         client.set_gui_value(picker, client.control(picker)["props"]["options"][3])
-        client.wait_until(lambda: "loading" not in client.html_containing("inspector-video"))
+        client.wait_until(lambda: "loading" not in client.html_containing("<div class='inspector-video'"))
 """
 
 from __future__ import annotations

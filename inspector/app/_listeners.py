@@ -17,6 +17,10 @@ class Listeners:
         with self._lock:
             self._fns.append(fn)
 
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._fns)
+
     def remove(self, fn: Callable[[], None]) -> None:
         with self._lock:
             self._fns = [f for f in self._fns if f != fn]  # bound methods compare equal, not identical

@@ -52,13 +52,15 @@ class InspectorApp:
         self.tabs: dict[int, TabState] = {}
         self._tabs_changed = threading.Condition()
         self._decoder = ThreadPoolExecutor(DECODE_WORKERS, thread_name_prefix="inspector-decode")
+        # video-action frame matches, after a rollout's frames: one at a time, beside the decoders
+        self._matcher = ThreadPoolExecutor(1, thread_name_prefix="inspector-match")
         # Meshes and the FK chain take ~1 s to load: start now, wait only where they are needed.
         loader = ThreadPoolExecutor(1, thread_name_prefix="inspector-robot")
         self._robot: Future[SharedRobot] = loader.submit(_load_robot)
         loader.shutdown(wait=False)  # the one job still runs; the thread exits after it
         self.frame_cache = FrameCache(int(cache_mb * 2**20))
         self.catalog = Catalog(sources, self._decoder, joint_child_links(), self.frame_cache,
-                               metrics_cache if metrics_cache is not None else MetricsCache())
+                               metrics_cache if metrics_cache is not None else MetricsCache(), self._matcher)
         # summary rows of every rollout for the overview, computed once when a tab first shows it
         self.overview_rows = OverviewRows(self.catalog)
         self.server = viser.ViserServer(host=host, port=port, label="inspector", verbose=False)
@@ -122,6 +124,7 @@ class InspectorApp:
         self.overview_rows.stop()
         self.server.stop()
         self._decoder.shutdown(wait=False, cancel_futures=True)
+        self._matcher.shutdown(wait=False, cancel_futures=True)
         self.sources.close()
 
 
