@@ -41,6 +41,17 @@ def test_every_rollout_has_gt_from_the_dataset(demo):
         assert set(tl.video_views()) == {"front", "wrist"}
 
 
+def test_every_clip_has_the_frames_its_rollout_says(demo):
+    """frames_per_chunk frames per chunk, as a real sample's 9 frames for 24 actions: a single
+    chunk's extra frames would be read as frames of later chunks, all at its last step."""
+    info = json.loads((DEMO_DIR / "dataset" / "meta" / "info.json").read_text())
+    assert info["fps"] == 30 and isinstance(info["fps"], int)  # as LeRobot writes it
+    for tag, tl in demo.items():
+        r = tl.rollout
+        for view in r.views:
+            assert len(r.video(view)) == r.n_chunks * r.frames_per_chunk, (tag, view)
+
+
 def test_tempo_fault(demo):
     tl = demo["tempo_0.8x"]
     assert tl.tempo == pytest.approx(0.8, abs=0.05)

@@ -295,7 +295,10 @@ class FrameStore(Notifying):
             todo = sorted(self._unmatched - self._matching)
             self._matching.update(todo)
         for view in todo:
-            self._matcher.submit(self._match_view, view)
+            try:
+                self._matcher.submit(self._match_view, view)
+            except RuntimeError:  # the server is stopping: nothing more runs
+                return
 
     def _match_view(self, view: str) -> None:
         """The view's video metrics as the report computes them (PSNR and the frame match)."""

@@ -290,11 +290,14 @@ class VideoSegment:
         path: the mp4 file.
         from_timestamp: start of the episode in the file [s] (0 for v2.1, one file per episode).
         to_timestamp: end of the episode in the file [s], exclusive; None = end of file.
+        video_key: the camera's feature (``observation.images.<camera>``), naming the window's
+            columns of the episode index in errors.
     """
 
     path: Path
     from_timestamp: float = 0.0
     to_timestamp: float | None = None
+    video_key: str = ""
 
 
 @dataclass(frozen=True)
@@ -379,12 +382,18 @@ class Episode:
         episode frame ``start_frame + i``); nothing is read.
 
         Raises:
-            InspectorError: unknown camera.
+            InspectorError: unknown camera, or a window in the file that is not a span of seconds
+                (one episode's index row: the other episodes still read).
         """
         if camera not in self.videos:
             raise InspectorError(self.source / INFO_PATH, f"episode {self.index} has no camera {camera!r}; "
                                                           f"cameras: {self.cameras}")
         seg = self.videos[camera]
+        for name, value in (("from_timestamp", seg.from_timestamp), ("to_timestamp", seg.to_timestamp)):
+            if value is not None and not (np.isfinite(value) and value >= 0):
+                raise InspectorError(seg.path, f"episode {self.index}: the episode index gives "
+                                               f"'{ep_video_column(seg.video_key, name)}' = {value}, "
+                                               f"not a time in this file [s]")
         return VideoClip(seg.path, seg.from_timestamp + start_frame / self.fps, seg.to_timestamp)
 
     def frame(self, camera: str, index: int, size: tuple[int, int] | None = None) -> npt.NDArray[np.uint8]:
@@ -661,7 +670,7 @@ class LeRobotDataset:
                     v = {fld: row[ep_video_column(key, fld)] for fld in video_fields}
                     path = self._format_path(VIDEO_PATH_KEY, self.video_path, video_key=key,
                                              chunk_index=v["chunk_index"], file_index=v["file_index"])
-                    videos[cam] = VideoSegment(path, float(v["from_timestamp"]), float(v["to_timestamp"]))
+                    videos[cam] = VideoSegment(path, float(v["from_timestamp"]), float(v["to_timestamp"]), key)
                 infos.append(EpisodeInfo(ep, int(row[EP_LENGTH]), [str(t) for t in row[EP_TASKS] or []],
                                          data_file, int(row[EP_FROM_INDEX]), int(row[EP_TO_INDEX]), videos))
         return infos

@@ -88,11 +88,16 @@ def rebuild_demo(out: Path | None = None, quick: bool = False, log: Callable[[st
 
         write_lerobot_dataset(writer.root / DATASET_DIR,
                               [EpisodeData(e.task, e.state, e.action, e.frames) for e in episodes],
-                              fps=FPS, units=Units("degrees"))  # type: ignore[arg-type]  # BUG?: float fps 30.0 where int is declared; info.json gets "fps": 30.0
+                              fps=int(FPS), units=Units("degrees"))  # LeRobot writes a whole fps
         for spec in _rollout_specs(episodes, rng, quick):
             ep = episodes[spec.episode]
             executed, chunks, path_time = spec.build(ep.action, rng)
-            frames = _imagine(imagined_scene, layouts, scripts[spec.episode][1], ep, executed, path_time, rng)
+            # A single chunk's video shows its executed steps, one frame each, as frames_per_chunk
+            # says (a real sample's 9 frames): frames of the unexecuted tail would be read as later
+            # chunks' frames, held at the last step.
+            shown = len(executed) if spec.kind == "autoregressive" else EXECUTED
+            frames = _imagine(imagined_scene, layouts, scripts[spec.episode][1], ep, executed[:shown],
+                              path_time[:shown], rng)
             states = np.concatenate([executed[:1], chunks[:, EXECUTED - 1]]) if spec.kind == "autoregressive" else None
             writer.add_rollout(spec.tag, kind=spec.kind, actions=chunks, states=states, prompt=spec.prompt,
                                episode_index=spec.episode, start_frame=spec.start, fps=FPS,
