@@ -56,25 +56,43 @@ JOINT_MATCH_MAX = 5.0
 
 def thumbnail(rgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
     """(rows * cols,) grayscale thumbnail of an (H, W, 3) frame, zero mean and unit length
-    (all zeros for a frame of one flat colour, which matches nothing)."""
+    (all zeros for a frame of one flat colour, which matches nothing).
+
+    Each cell is the mean luma of :data:`CELL_SAMPLES` x :data:`CELL_SAMPLES` pixels spread evenly
+    over it: a thumbnail is taken of every frame of both clips, and reading a few pixels costs a
+    sixth of averaging all of them (0.03 vs 0.18 ms a 320x176 frame; the same matches on the
+    demo and the shift tests).
+    """
     rows, cols = THUMB_SHAPE
-    h, w = rgb.shape[:2]
-    # every ``stride``-th pixel first: 4x the grid still averages away pixel noise, at a fraction
-    # of the cost of converting the whole frame
-    stride = max(1, min(h // (4 * rows), w // (4 * cols)))
-    small = rgb[::stride, ::stride].astype(np.float32)
-    gray = small @ np.array([0.299, 0.587, 0.114], np.float32)
-    r_edges = np.linspace(0, gray.shape[0], rows + 1).astype(np.int64)
-    c_edges = np.linspace(0, gray.shape[1], cols + 1).astype(np.int64)
-    if gray.shape[0] < rows or gray.shape[1] < cols:  # tinier than the grid: nearest pixels
-        gray = gray[np.minimum(r_edges[:-1], gray.shape[0] - 1)][:, np.minimum(c_edges[:-1], gray.shape[1] - 1)]
-    else:
-        sums = np.add.reduceat(np.add.reduceat(gray, r_edges[:-1], axis=0), c_edges[:-1], axis=1)
-        gray = (sums / np.outer(np.diff(r_edges), np.diff(c_edges))).astype(np.float32)
-    v = gray.ravel()
-    v = v - v.mean()
-    norm = float(np.linalg.norm(v))
+    row_at, col_at = _sample_grid(rgb.shape[0], rgb.shape[1])
+    samples = np.take(np.take(rgb, row_at, axis=0), col_at, axis=1)  # (rows * k, cols * k, 3)
+    # (rows, k, cols, k * 3): the k sample rows of each cell summed, then its k columns' RGB weighed
+    cells = samples.reshape(rows, CELL_SAMPLES, cols, CELL_SAMPLES * 3).astype(np.float32).sum(axis=1)
+    v = (cells @ _CELL_LUMA).ravel()
+    v -= v.mean()
+    norm = float(np.sqrt(v @ v))
     return v / norm if norm > 1e-3 * np.sqrt(v.size) else np.zeros_like(v)
+
+
+# Pixels read per thumbnail cell along each axis.
+CELL_SAMPLES = 2
+# Luma weights (ITU-R 601) of one cell row's samples, divided by the samples a cell has: a dot
+# product with them is the cell's mean luma.
+_CELL_LUMA = np.tile(np.array([0.299, 0.587, 0.114], np.float32), CELL_SAMPLES) / CELL_SAMPLES**2
+_GRIDS: dict[tuple[int, int], tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]] = {}
+
+
+def _sample_grid(height: int, width: int) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+    """Rows and columns of the pixels a thumbnail reads: evenly spaced, centred in their share
+    of the frame (a frame smaller than the grid repeats its pixels)."""
+    grid = _GRIDS.get((height, width))
+    if grid is None:
+        def centres(n: int, cells: int) -> npt.NDArray[np.intp]:
+            m = cells * CELL_SAMPLES
+            return np.minimum(((np.arange(m) + 0.5) * n / m).astype(np.intp), n - 1)
+
+        grid = _GRIDS[(height, width)] = (centres(height, THUMB_SHAPE[0]), centres(width, THUMB_SHAPE[1]))
+    return grid
 
 
 class FrameMatchJson(TypedDict):
