@@ -230,7 +230,9 @@ def test_report_gives_the_numbers_it_gave_before_streaming():
     old_rows = {r["tag"]: r for r in before["rollouts"]}
     # the rollouts the demo had then (video_ahead_1s came later), in the same order
     assert [r["tag"] for r in now["rollouts"] if r["tag"] in old_rows] == list(old_rows)
-    for row in (r for r in now["rollouts"] if r["tag"] in old_rows):
+    # The single chunks were rendered again since (9 frames, as their frames_per_chunk says, which
+    # moved the noise draws of all but the first): the demo's own tests check them, not this.
+    for row in (r for r in now["rollouts"] if r["tag"] in old_rows and not r["tag"].startswith("single_f")):
         old = old_rows[row["tag"]]
         for key in ("rmse_deg", "per_joint_rmse", "per_step_mse", "time_aligned_drift", "best_match_drift",
                     "tempo", "video_psnr_db", "post_episode_chunks"):

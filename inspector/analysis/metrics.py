@@ -87,6 +87,12 @@ def time_aligned(pred: npt.ArrayLike, gt: npt.ArrayLike, offset: int = 0
     return joint_distance(pred, gt_aligned), gt_aligned, t >= gt.shape[0]
 
 
+# Threads a nearest-pose query may use (-1: one per core); a pool's worker process sets 1, as for
+# DTW: its own threads only crowd the other workers (and a Ctrl-C in the middle of a query once
+# left one of them printing a std::bad_alloc traceback).
+KDTREE_WORKERS = -1
+
+
 def best_match(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, npt.NDArray[np.int64]]:
     """Distance to the nearest GT pose anywhere in the episode (speed-invariant).
 
@@ -107,7 +113,7 @@ def best_match(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, npt.NDArr
     g = np.asarray(gt, np.float64)
     if len(g) == 0:
         raise ValueError("best_match: the GT episode is empty")
-    drift, nearest = cKDTree(g).query(p.reshape(-1, g.shape[1]), k=1, workers=-1)
+    drift, nearest = cKDTree(g).query(p.reshape(-1, g.shape[1]), k=1, workers=KDTREE_WORKERS)
     nearest = np.minimum(nearest, len(g) - 1)  # the tree answers len(g) for an infinite distance
     # A GT hold (the arm at rest) repeats one pose over many frames, and every frame of it ties;
     # an arbitrary one of them would bias the tempo fit, so each match moves to the middle of its run.
