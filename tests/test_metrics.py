@@ -147,7 +147,8 @@ def test_reverse_order_is_penalised_by_dtw_not_best_match():
 
 
 def _reference_dtw(pred, gt):
-    """Textbook DTW with a Python double loop: total cost, path length, per-sample mean cost."""
+    """Textbook open-end DTW with a Python double loop: total cost, path length, per-sample mean
+    cost. The path starts at both starts and ends at the cheapest cell of the last row."""
     T, G = len(pred), len(gt)
     c = np.linalg.norm(pred[:, None] - gt[None], axis=-1)
     D = np.full((T + 1, G + 1), np.inf)
@@ -155,7 +156,8 @@ def _reference_dtw(pred, gt):
     for i in range(1, T + 1):
         for j in range(1, G + 1):
             D[i, j] = c[i - 1, j - 1] + min(D[i - 1, j - 1], D[i - 1, j], D[i, j - 1])
-    i, j, cells = T, G, []
+    end = 1 + int(np.argmin(D[T, 1:]))
+    i, j, cells = T, end, []
     while (i, j) != (0, 0):
         cells.append((i - 1, j - 1))
         steps = {(i - 1, j - 1): D[i - 1, j - 1], (i - 1, j): D[i - 1, j], (i, j - 1): D[i, j - 1]}
@@ -165,7 +167,7 @@ def _reference_dtw(pred, gt):
     for a, b in cells:
         drift[a] += c[a, b]
         count[a] += 1
-    return D[T, G], len(cells), drift / count
+    return D[T, end], len(cells), drift / count
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -189,6 +191,18 @@ def test_dtw_paths_along_the_tables_edges_match_the_textbook(T, G):
     ours_drift, ours_cost = metrics.dtw(pred, gt)
     assert ours_cost == pytest.approx(total / length, rel=1e-5)
     np.testing.assert_allclose(ours_drift, drift, rtol=1e-5)
+
+
+def test_dtw_charges_a_prediction_that_covers_part_of_the_episode_nothing_for_the_rest():
+    """A slow rollout (or a single chunk) follows the first part of the GT path exactly: its
+    alignment ends where it ends, not at the episode's last frame."""
+    gt = _smooth_path(300)
+    for part in (gt[:240], gt[:24]):
+        drift, cost = metrics.dtw(part, gt)
+        assert drift.max() < 1e-6 and cost < 1e-6
+    slow = gt[np.minimum(np.arange(300) * 0.8, 299).astype(int)]  # 0.8x: 240 frames of the path
+    drift, _ = metrics.dtw(slow, gt)
+    assert drift.max() < 1e-6  # anchored at both ends, its last step took on the last 60 frames
 
 
 def test_dtw_batched_equals_single():

@@ -237,10 +237,10 @@ def test_report_gives_the_numbers_it_gave_before_streaming():
         for key in ("rmse_deg", "per_joint_rmse", "per_step_mse", "time_aligned_drift", "best_match_drift",
                     "tempo", "video_psnr_db", "post_episode_chunks"):
             _close(row[key], old[key], f"{row['tag']}.{key}", rel=1e-12)
-        # FK is now exact to 1e-15 m (it was 5e-7 m off through a float32 URDF parse); DTW's path
-        # search may break a float32 tie the other way
+        # FK is now exact to 1e-15 m (it was 5e-7 m off through a float32 URDF parse). DTW is left
+        # out: its alignment is open at the end since (a rollout is not charged for the part of
+        # the episode it never reaches), and test_metrics checks it against the textbook's.
         _close(row["ee_error_mm"], old["ee_error_mm"], f"{row['tag']}.ee_error_mm", rel=1e-6)
-        assert row["dtw_drift"]["mean"] == pytest.approx(old["dtw_drift"]["mean"], rel=1e-3)
         assert row["limit_violations"]["count"] == old["limit_violations"]["count"]
         assert row["limit_violations"]["by_joint"] == old["limit_violations"]["by_joint"]
 

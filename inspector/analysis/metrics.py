@@ -180,6 +180,9 @@ def dtw(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, Array | float]:
     """Order-preserving alignment (dynamic time warping) of predicted and GT paths.
 
     Unlike best-match, a prediction that visits the right poses in the wrong order pays for it.
+    Both start together, but the alignment is open at the end: it ends at the GT frame the
+    prediction's path reaches most cheaply, so a rollout that covers only part of the episode (a
+    single chunk, a slow one) is not charged for the rest of it at its last steps.
     Rollouts are processed in blocks sized to a memory budget (:data:`DTW_BLOCK_BYTES`), one
     thread per core (numpy releases the GIL in the row operations).
 
@@ -276,13 +279,15 @@ def _dtw_block(p: npt.NDArray[np.float64], g: npt.NDArray[np.float64]) -> tuple[
         np.bitwise_or(d, up.view(np.uint8), out=d)
         prev, row = row, prev
         row[:, 0] = np.inf  # D[i, -1]: only D[-1, -1] is the origin
-    drift, total, length = _dtw_backtrack(p, g, direction)
+    ends = np.argmin(prev[:, 1:], axis=1)  # open end: the cheapest D[T-1, j] (the earliest on a tie)
+    drift, total, length = _dtw_backtrack(p, g, direction, ends)
     return drift, total / length
 
 
-def _dtw_backtrack(p: npt.NDArray[np.float64], g: npt.NDArray[np.float64], direction: npt.NDArray[np.uint8]
-                   ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """Walk each optimal path of a block back from (T-1, G-1) to (0, 0), then measure its cells.
+def _dtw_backtrack(p: npt.NDArray[np.float64], g: npt.NDArray[np.float64], direction: npt.NDArray[np.uint8],
+                   ends: npt.NDArray[np.intp]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64],
+                                                        npt.NDArray[np.float64]]:
+    """Walk each optimal path of a block back from (T-1, ends[b]) to (0, 0), then measure its cells.
 
     Each cell names its predecessor in ``direction`` (B, T, G). The walk is a plain loop over a
     byte view of the table (under a microsecond a cell; a vectorised walk over the block paid
@@ -300,7 +305,7 @@ def _dtw_backtrack(p: npt.NDArray[np.float64], g: npt.NDArray[np.float64], direc
     path_len = np.empty(B, np.int64)
     for b in range(B):
         codes = memoryview(direction[b]).cast("B")  # codes[i * G + j]: _dtw_block made it C-ordered
-        i, j = T - 1, G - 1
+        i, j = T - 1, int(ends[b])
         start = len(path_i)
         while True:
             path_i.append(i)
