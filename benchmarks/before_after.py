@@ -4,8 +4,9 @@
 
 BEFORE and AFTER are git revisions of this repository (AFTER: the working tree as it is). Each is
 exported (``git archive``) into a temporary directory and run from there with the same Python, on
-the benchmark sessions of ``benchmarks/run.py`` (the demo; 300 rollouts without video; 60 with
-video), alternating which goes first, each run with a fresh metrics cache. Prints, per session,
+the sessions of ``benchmarks/run.py``'s ``report`` rows (the demo; 1,000 rollouts without video;
+200 with video; ``--quick``: 300 and 60, as ``run.py --quick``), alternating which goes first, each
+run with a fresh metrics cache. Prints, per session,
 the median CPU seconds of the whole process tree (user + system: what the change costs, steadier
 than wall time on a shared machine), the median wall time, and the after/before ratios.
 """
@@ -36,11 +37,13 @@ def export_tree(rev: str, dest: Path) -> Path:
 
 
 def report_once(tree: Path, session: Path, cache: Path) -> tuple[float, float]:
-    """(CPU seconds of the process tree, wall seconds) of ``inspector report SESSION --json``."""
+    """(CPU seconds of the process tree, wall seconds) of ``inspector report SESSION --json``,
+    run from ``tree``: ``python -m`` puts the working directory first on the import path, so from
+    anywhere else (this repository's root) it would import that directory's ``inspector``."""
     env = {**os.environ, "PYTHONPATH": str(tree), "INSPECTOR_CACHE_DIR": str(cache)}
     before, start = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
-    subprocess.run([sys.executable, "-m", "inspector", "report", str(session), "--json"], env=env,
-                   stdout=subprocess.DEVNULL, check=True)
+    subprocess.run([sys.executable, "-m", "inspector", "report", str(session.resolve()), "--json"], env=env,
+                   cwd=tree, stdout=subprocess.DEVNULL, check=True)
     wall, after = time.perf_counter() - start, resource.getrusage(resource.RUSAGE_CHILDREN)
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), wall
 
@@ -50,14 +53,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("before", help="git revision measured first as the baseline, e.g. HEAD~3")
     parser.add_argument("after", nargs="?", help="git revision (default: the working tree)")
     parser.add_argument("--reps", type=int, default=2, help="runs of each side per session (default 2)")
-    parser.add_argument("--quick", action="store_true", help="smaller sessions (100 and 20 rollouts)")
+    parser.add_argument("--quick", action="store_true", help="smaller sessions (300 and 60 rollouts)")
     args = parser.parse_args(argv)
 
     with tempfile.TemporaryDirectory(prefix="inspector-before-after-") as tmp_name:
         tmp = Path(tmp_name)
         trees = {"before": export_tree(args.before, tmp / "before"),
                  "after": export_tree(args.after, tmp / "after") if args.after else REPO}
-        many, with_video = (100, 20) if args.quick else (300, 60)
+        many, with_video = (300, 60) if args.quick else (1000, 200)
         sessions = {"report_demo": REPO / "sessions" / "demo",
                     f"report_{many}": make_eval_session(tmp / "many", many, video=False),
                     f"report_{with_video}_video": make_eval_session(tmp / "video", with_video, video=True)}

@@ -117,6 +117,8 @@ def _list_checker(item_type: Any) -> Check:
         if item_type is float or nullable_floats:
             if all(type(v) is float and math.isfinite(v) or nullable_floats and v is None for v in value):
                 return None
+        elif item_type in (int, str, bool) and all(type(v) is item_type for v in value):
+            return None  # a frame match's runs: thousands of short lists of indexes
         return next((m for i, v in enumerate(value) if (m := item(v, f"{where}[{i}]"))), None)
     return check_list
 

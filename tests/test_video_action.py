@@ -116,6 +116,126 @@ def test_frame_match_round_trips_through_json() -> None:
         video_action.FrameMatch.from_json({**match.to_json(), "ties": []})
 
 
+# ----------------------------------------------------------------------------------------------
+# The match and the agreement work on every frame at once; these references read one frame at a
+# time, the way the definitions in the README say it.
+
+
+def _reference_match(imagined: np.ndarray, gt: np.ndarray) -> tuple[np.ndarray, list[list[int]]]:
+    """(gt_index, ties) frame by frame: the best GT frame, and the runs of GT frames whose score
+    is within TIE_FRACTION of the confidence of it (confidence: best - median score)."""
+    gt_index, ties = np.full(len(imagined), np.nan), []
+    for f, row in enumerate(imagined @ gt.T):
+        best, top = int(row.argmax()), row.max()
+        confidence = top - np.median(row)
+        if confidence < video_action.MIN_CONFIDENCE or top < video_action.MIN_CORRELATION:
+            ties.append([])
+            continue
+        near = [g for g in range(len(gt)) if row[g] >= top - video_action.TIE_FRACTION * confidence]
+        runs = [[g, g] for g in near[:1]]
+        for g in near[1:]:
+            if g == runs[-1][1] + 1:
+                runs[-1][1] = g
+            else:
+                runs.append([g, g])
+        gt_index[f] = next((a + b) / 2 for a, b in runs if a <= best <= b)
+        ties.append([i for run in runs for i in run])
+    return gt_index, ties
+
+
+def _reference_agreement(match: video_action.FrameMatch, frame_step: np.ndarray, gt_step_of_index: np.ndarray,
+                         joints: video_action.JointTimes) -> tuple[np.ndarray, np.ndarray]:
+    """(video step, joints step) frame by frame: each side's tied runs by their middles, and the
+    pair nearest to each other (the first such in joint-run, then video-run order)."""
+    video, joint = np.full(len(frame_step), np.nan), np.full(len(frame_step), np.nan)
+    for f, step in enumerate(frame_step):
+        if joints.best_drift[step] <= video_action.JOINT_MATCH_MAX:
+            joint[f] = joints.best_index[step] - joints.offset
+        if not match.matched[f]:
+            continue
+        video[f] = np.interp(match.gt_index[f], np.arange(len(gt_step_of_index)), gt_step_of_index)
+        if np.isnan(joint[f]):
+            continue
+        video_runs = [(gt_step_of_index[a] + gt_step_of_index[b]) / 2 for a, b in zip(match.ties[f][::2], match.ties[f][1::2])]
+        distance = np.linalg.norm(joints.gt - joints.pred[step], axis=1)
+        tied = [g for g in range(len(distance)) if distance[g] <= joints.best_drift[step] + video_action.JOINT_TIE]
+        joint_runs: list[list[int]] = []
+        for g in tied:
+            if joint_runs and g == joint_runs[-1][1] + 1:
+                joint_runs[-1][1] = g
+            else:
+                joint_runs.append([g, g])
+        pairs = [(abs(v - ((a + b) / 2 - joints.offset)), v, (a + b) / 2 - joints.offset)
+                 for a, b in joint_runs for v in video_runs]
+        if pairs:
+            _, video[f], joint[f] = min(pairs, key=lambda p: p[0])  # min() keeps the first of equals
+    return video, joint
+
+
+def _there_and_back(n: int) -> np.ndarray:
+    """(n,) times of an episode that goes out, holds, comes back and holds: most poses and
+    pictures occur twice, and the holds tie with themselves."""
+    q = n // 4
+    return 120 * np.concatenate([np.linspace(0, 1, q), np.ones(q), np.linspace(1, 0, q), np.zeros(n - 3 * q)])
+
+
+def test_the_match_of_every_frame_at_once_equals_a_frame_by_frame_one() -> None:
+    gt_times = _there_and_back(120)
+    gt = video_action.thumbnails(np.stack([video_action.thumbnail_samples(f) for f in _scene(gt_times)]))
+    rng = np.random.default_rng(3)
+    frames = _scene(np.clip(gt_times[::2] + rng.normal(0, 3, 60), 0, 120)).astype(np.int16)
+    frames[40:45] = 128  # flat: no match
+    noisy = np.clip(frames + rng.integers(-20, 20, frames.shape), 0, 255).astype(np.uint8)
+    imagined = np.stack([video_action.thumbnail(f) for f in noisy])
+
+    match = video_action.match_frames(imagined, gt)
+    gt_index, ties = _reference_match(imagined, gt)
+    np.testing.assert_array_equal(match.gt_index, gt_index)
+    assert match.ties == ties
+    assert sum(len(t) >= 4 for t in ties) >= 10  # frames tied with both legs of the episode
+    assert not match.matched[40:45].any()
+
+
+def test_the_agreement_of_every_frame_at_once_equals_a_frame_by_frame_one() -> None:
+    gt_times = _there_and_back(160)
+    gt_joints = _joints(gt_times)
+    gt = video_action.thumbnails(np.stack([video_action.thumbnail_samples(f) for f in _scene(gt_times)]))
+    rng = np.random.default_rng(4)
+    offset, n = 7, 140
+    at = np.clip(offset + np.arange(n) + rng.integers(-3, 4, n), 0, len(gt_times) - 1)
+    pred = gt_joints[at] + rng.normal(0, 0.05, (n, 6))
+    pred[100:110] += 8.0  # off the GT path: no joints' GT time
+    distance = np.linalg.norm(gt_joints[None] - pred[:, None], axis=2)
+    joints = video_action.JointTimes(pred, gt_joints, offset, distance.argmin(axis=1), distance.min(axis=1))
+    imagined = gt[np.clip(at + rng.integers(-5, 6, n), 0, len(gt) - 1)]
+    match = video_action.match_frames(imagined, gt)
+    frame_step = np.arange(n)
+    gt_step_of_index = np.arange(len(gt), dtype=np.float64) - offset
+
+    va = video_action.agreement("front", match, frame_step, 9, FPS, gt_step_of_index, joints)
+    video, joint = _reference_agreement(match, frame_step, gt_step_of_index, joints)
+    np.testing.assert_array_equal(va.video_gt_s, video / FPS)
+    assert va.joints_gt_s is not None
+    np.testing.assert_array_equal(va.joints_gt_s, joint / FPS)
+    assert np.isnan(va.joints_gt_s[100:110]).all() and np.isfinite(va.video_gt_s[100:110]).any()
+    # both sides ambiguous somewhere: the pairing had more than one pair to choose from
+    assert sum(len(t) >= 4 for t in match.ties) >= 10
+
+
+def test_thumbnails_taken_in_batches_equal_thumbnails_taken_one_by_one() -> None:
+    rng = np.random.default_rng(6)
+    frames = [rng.integers(0, 255, (72, 96, 3), dtype=np.uint8) for _ in range(10)] + [np.full((72, 96, 3), 9, np.uint8)]
+    taken = video_action.Thumbnails()
+    taken.BATCH = 4  # three batches and a rest
+    for i, f in enumerate(frames):
+        taken.add(2 * i, f)
+    assert taken.indexes == list(range(0, 22, 2))
+    one_by_one = np.stack([video_action.thumbnail(f) for f in frames])
+    np.testing.assert_array_equal(taken.stacked(), one_by_one)
+    np.testing.assert_allclose(np.linalg.norm(one_by_one[:-1], axis=1), 1.0, rtol=1e-5)
+    assert not one_by_one[-1].any()  # one flat colour: all zeros, which matches nothing
+
+
 def test_the_recording_holds_both_gt_times_the_lag_and_the_split(tmp_path: Path) -> None:
     from test_export import Recording, rrd_verify
 
@@ -176,9 +296,45 @@ def test_the_app_plots_both_gt_times_marks_the_split_and_reads_the_lag(tmp_path:
         app.stop()
 
 
+def test_a_frame_match_that_fails_in_the_app_is_named_on_the_plot(tmp_path: Path, monkeypatch) -> None:
+    import time
+
+    from test_app import connect, key
+
+    from inspector.analysis.timeline import RolloutTimeline
+    from inspector.app import serve
+    from inspector.errors import InspectorError
+
+    times = np.arange(N_STEPS + 30, dtype=np.float64)
+    _write(tmp_path / "s", np.arange(N_STEPS), _scene(times), _joints(times))
+
+    def broken(self, view: str, with_ssim: bool = False):
+        raise InspectorError(tmp_path / "gt_front.mp4", "frame 77 cannot be decoded")
+
+    monkeypatch.setattr(RolloutTimeline, "video_metrics", broken)  # the fill streams the clips itself
+    app = serve([tmp_path / "s"], port=0, block=False)
+    try:
+        client, tab = connect(app)
+        with client:
+            assert tab.open(key(app, "r"))
+            assert tab.loaded.frames.done.wait(120)
+            assert tab.loaded.frames.psnr["front"] is not None  # the frames and the PSNR stand
+            plot = tab.plots.agreement_plot
+            assert plot is not None
+            deadline = time.monotonic() + 60
+            while "no frame match" not in plot.handle.title:  # the plots follow the frames' callback
+                assert time.monotonic() < deadline, f"the plot does not say the match failed: {plot.handle.title!r}"
+                time.sleep(0.05)
+            assert "front: no frame match (" in plot.handle.title and "frame 77 cannot be decoded" in plot.handle.title
+            tab.open(key(app, "r"))  # built again: it still says so
+            assert "frame 77 cannot be decoded" in tab.plots.agreement_plot.handle.title
+    finally:
+        app.stop()
+
+
 def test_the_app_shows_frames_before_matching_them_and_matches_only_what_a_tab_shows(tmp_path: Path) -> None:
-    """The frame match costs a third of a fill: the app's frames come first, the match after
-    (the same numbers the report computes), and only for a rollout a tab shows."""
+    """The app's frames come first and the frame match after (the same numbers the report
+    computes), and only for a rollout a tab shows."""
     import threading
     from concurrent.futures import ThreadPoolExecutor
 
@@ -244,3 +400,38 @@ def test_the_overview_table_has_a_median_lag_column() -> None:
     rows = [OverviewRow("s / r", "s", "r", "autoregressive", "pick", Path("/nowhere"), summary, None)]
     html = table_html(rows, select_rows(rows, Query(), {}), {})
     assert ">lag front<" in html and ">+0.80<" in html
+
+
+def test_gt_thumbnails_kept_from_an_earlier_window_match_as_a_fresh_read(monkeypatch, tmp_path: Path) -> None:
+    """Single chunks of one episode start at different GT frames; the thumbnails of the episode
+    read for the earliest serve the later ones (the tail of its window) with the same match."""
+    import os
+    import shutil
+
+    from inspector.analysis import video_metrics
+    from inspector.demo.generate import DEMO_DIR
+
+    if not (DEMO_DIR / "session.json").is_file():
+        pytest.skip("sessions/demo not built (inspector demo --rebuild)")
+    shutil.copytree(DEMO_DIR, tmp_path / "demo")
+    session = open_session(tmp_path / "demo")
+
+    def metrics(tag: str) -> video_metrics.VideoMetrics:
+        return build_timeline(session.rollouts[tag]).video_metrics("front")
+
+    kept = video_metrics.GtThumbnailCache()
+    served: list[bool] = []
+    get = kept.get
+    monkeypatch.setattr(kept, "get", lambda reader: served.append(get(reader) is not None) or get(reader))
+    monkeypatch.setattr(video_metrics, "GT_THUMBNAILS", video_metrics.GtThumbnailCache())
+    fresh = metrics("single_f076")
+    monkeypatch.setattr(video_metrics, "GT_THUMBNAILS", kept)
+    assert metrics("single_f000").to_json()["match"] is not None and served == [False]
+    again = metrics("single_f076")
+    assert served == [False, True]  # the tail of frame 0's window: nothing decoded past the pairing
+    assert again.to_json() == fresh.to_json()
+    assert fresh.match is not None and fresh.match.matched.any()
+
+    gt_clip = build_timeline(session.rollouts["single_f076"]).gt.clips["front"].path
+    os.utime(gt_clip, ns=(0, 0))  # the GT video rewritten: what was kept is not its thumbnails
+    assert metrics("single_f076").to_json() == fresh.to_json() and served[-1] is False

@@ -11,6 +11,8 @@ unless asked not to (the app's frame fill, which matches after).
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import TypedDict
@@ -18,10 +20,10 @@ from typing import TypedDict
 import numpy as np
 import numpy.typing as npt
 
-from ..data.video import ForwardReader, VideoClip
+from ..data.video import ForwardReader, VideoClip, probe
 from ..errors import InspectorError
 from . import metrics
-from .video_action import FrameMatch, FrameMatchJson, match_frames, thumbnail
+from .video_action import FrameMatch, FrameMatchJson, Thumbnails, match_frames
 
 Array = npt.NDArray[np.float64]
 Frame = npt.NDArray[np.uint8]
@@ -94,18 +96,24 @@ def compare_clips(view: str, imagined: Sequence[VideoClip], gt: VideoClip | None
         on_gt: called as ``on_gt(index, rgb)`` for every GT frame of the clip, paired or not
             (at the first imagined clip's size).
         match: also match the frames (False: ``match`` is None, and no thumbnail is taken; the
-            app shows frames first and matches them after, as thumbnails cost a third of a fill).
+            app shows frames first and matches them after, so a rollout can be scrubbed sooner).
 
     Raises:
         InspectorError: a clip cannot be decoded (naming it).
     """
     streams = [_Stream(clip) for clip in imagined]
-    gt_thumbs: list[tuple[int, np.ndarray]] = []
-    thumbs: list[list[np.ndarray | None]] = [[] for _ in streams]
+    gt_thumbs = Thumbnails()
+    thumbs = [Thumbnails() for _ in streams]
+    known_gt: list[GtThumbnails | None] = []  # the clip's thumbnails from an earlier call, once looked up
+
+    def gt_known() -> GtThumbnails | None:
+        if not known_gt and gt_stream is not None:
+            known_gt.append(GT_THUMBNAILS.get(gt_stream))
+        return known_gt[0] if known_gt else None
 
     def gt_seen(index: int, rgb: Frame) -> None:
-        if match:
-            gt_thumbs.append((index, thumbnail(rgb)))
+        if match and gt_known() is None:
+            gt_thumbs.add(index, rgb)
         if on_gt is not None:
             on_gt(index, rgb)
 
@@ -127,38 +135,122 @@ def compare_clips(view: str, imagined: Sequence[VideoClip], gt: VideoClip | None
             rgb = item[1]
             if on_imagined is not None:
                 on_imagined(b, f, rgb)
-            if gt_stream is not None and match:
-                _set(thumbs[b], f, thumbnail(rgb))
             gt_rgb = gt_stream.frame_at(target, rgb.shape[1::-1]) if gt_stream is not None and target >= 0 else None
             _set(psnr[b], f, np.nan if gt_rgb is None else float(metrics.psnr(rgb[None], gt_rgb[None])[0]))
             if with_ssim:
                 _set(ssim[b], f, np.nan if gt_rgb is None else float(metrics.ssim(rgb[None], gt_rgb[None])[0]))
+            if gt_stream is not None and match:
+                # after the PSNR, which has just read the whole frame: its samples are in the CPU's
+                # cache now (3x quicker to gather than from the frame as it was decoded, ahead)
+                thumbs[b].add(f, rgb)
     matchable = gt_stream is not None and match
-    if gt_stream is not None and (match or on_gt is not None):
+    candidates = gt_known() if match else None
+    if gt_stream is not None and (on_gt is not None or (match and candidates is None)):
         try:
             gt_stream.drain()  # every GT frame is a candidate match (and is shown), paired or not
         except InspectorError:
             # past the frames PSNR pairs with, the GT clip cannot be decoded: the PSNR stands, and
             # with candidates missing, a match would be a guess, so there is none
             matchable = False
-    matches = [_match(t, gt_thumbs) if matchable else None for t in thumbs]
+        if matchable and candidates is None:
+            candidates = GT_THUMBNAILS.put(gt_stream, gt_thumbs)
+    matches = [_match(t, candidates) if matchable and candidates is not None else None for t in thumbs]
     return [VideoMetrics(view, np.array(p, dtype=np.float64), np.array(q, dtype=np.float64) if with_ssim else None, m)
             for p, q, m in zip(psnr, ssim, matches)]
 
 
-def _match(imagined: list[np.ndarray | None], gt: list[tuple[int, np.ndarray]]) -> FrameMatch:
-    """The frame match of one imagined clip's thumbnails (None: a gap) against the GT's."""
-    size = next((t.size for t in imagined if t is not None), 0) or (gt[0][1].size if gt else 0)
-    zero = np.zeros(size, np.float32)  # a gap matches nothing
-    frames = np.stack([zero if t is None else t for t in imagined]) if imagined else np.zeros((0, size), np.float32)
-    gt_frames = np.stack([t for _, t in gt]) if gt else np.zeros((0, size), np.float32)
-    # positions among the frames read -> indexes in the clip (its numbering may have gaps)
-    return match_frames(frames, gt_frames).reindexed([i for i, _ in gt])
+def _match(imagined: Thumbnails, gt: GtThumbnails) -> FrameMatch:
+    """The frame match of one imagined clip's thumbnails against the GT's."""
+    read = imagined.stacked()
+    frames = np.zeros((imagined.indexes[-1] + 1 if imagined.indexes else 0, read.shape[1]), np.float32)
+    frames[imagined.indexes] = read  # a gap in the clip's numbering is all zeros: it matches nothing
+    # positions among the GT frames read -> indexes in the clip (its numbering may have gaps)
+    return match_frames(frames, gt.thumbnails).reindexed(gt.indexes)
+
+
+@dataclass(frozen=True)
+class GtThumbnails:
+    """Thumbnails of every frame of a GT clip, at one size: the candidates of a frame match."""
+
+    indexes: list[int]
+    thumbnails: npt.NDArray[np.float32]
+
+
+class GtThumbnailCache:
+    """The GT thumbnails of the clips matched lately in this process, by file version, window end
+    and size. Rollouts of one episode from different start frames (single chunks) share no pass
+    over their GT clip, yet each is matched against every GT frame from its start on: reading the
+    rest of the clip again for each cost the demo's report a fifth of its CPU. A window that
+    starts later than one kept is its tail. ~1.4 MB an entry (445 frames).
+    """
+
+    def __init__(self, entries: int = 8) -> None:
+        self._entries = entries
+        self._items: OrderedDict[tuple, _KeptThumbnails] = OrderedDict()
+        self._lock = threading.Lock()
+
+    @staticmethod
+    def _place(reader: ForwardReader) -> tuple[tuple, int] | None:
+        """(the key of the reader's file version, window end and size; the file's frame number at
+        which its window starts), or None where the window does not start on one of the file's
+        frames (then frames of two windows need not have the same numbers)."""
+        clip = reader.clip
+        try:
+            stat = clip.path.stat()
+            fps = probe(clip.path).fps
+        except (OSError, InspectorError):
+            return None
+        first = (clip.start_s or 0.0) * fps
+        if not fps > 0 or abs(first - round(first)) > 1e-3:
+            return None
+        return (str(clip.path), stat.st_mtime_ns, stat.st_size, clip.end_s, reader.first_size), int(round(first))
+
+    def get(self, reader: ForwardReader) -> GtThumbnails | None:
+        """The thumbnails of ``reader``'s clip at the size it reads at, if known."""
+        place = self._place(reader)
+        if place is None:
+            return None
+        key, first = place
+        with self._lock:
+            kept = self._items.get(key)
+            if kept is None or kept.first > first:
+                return None
+            self._items.move_to_end(key)
+        tail = kept.numbers >= first
+        return GtThumbnails((kept.numbers[tail] - first).tolist(), kept.thumbnails[tail])
+
+    def put(self, reader: ForwardReader, thumbs: Thumbnails) -> GtThumbnails:
+        """Keep the thumbnails of every frame of ``reader``'s clip (read to its end)."""
+        entry = GtThumbnails(list(thumbs.indexes), thumbs.stacked())
+        place = self._place(reader)
+        if place is not None:
+            key, first = place
+            with self._lock:
+                kept = self._items.get(key)
+                if kept is None or kept.first > first:  # the longer window serves both
+                    self._items[key] = _KeptThumbnails(first, np.asarray(entry.indexes, np.int64) + first,
+                                                       entry.thumbnails)
+                self._items.move_to_end(key)
+                while len(self._items) > self._entries:
+                    self._items.popitem(last=False)
+        return entry
+
+
+@dataclass(frozen=True)
+class _KeptThumbnails:
+    """A window's GT thumbnails, numbered by frame of the file."""
+
+    first: int
+    numbers: npt.NDArray[np.int64]
+    thumbnails: npt.NDArray[np.float32]
+
+
+GT_THUMBNAILS = GtThumbnailCache()
 
 
 def _set(values: list, index: int, value) -> None:
-    """values[index] = value, padding a gap in the clip's numbering with NaN (None for thumbnails)."""
-    values.extend([np.nan if isinstance(value, float) else None] * (index + 1 - len(values)))
+    """values[index] = value, padding a gap in the clip's numbering with NaN."""
+    values.extend([np.nan] * (index + 1 - len(values)))
     values[index] = value
 
 

@@ -11,8 +11,8 @@ JPEG-encodes every frame as it passes and computes the view's PSNR on the way, s
 serves both. Reopening a recently seen rollout finds its frames in the cache; frames evicted
 since are decoded again in the background. The scrub path only looks frames up.
 
-The frame match of video-action agreement comes after: its thumbnails would add half again to
-the time until the rollout can be scrubbed, so once every view's frames are in, one worker
+The frame match of video-action agreement comes after: on the way it would delay the moment the
+rollout can be scrubbed (see the README's ``open`` benchmark), so once every view's frames are in, one worker
 computes each view's video metrics as the report does (:meth:`RolloutTimeline.video_metrics`)
 and the agreement plot fills in. A rollout no tab shows any more is not matched until one does.
 """
@@ -169,6 +169,7 @@ class FrameStore(Notifying):
         self._finished: set[str] = set()  # ... and whose video metrics are known (or failed, or has none)
         self._unmatched: set[str] = set()  # framed, with PSNR, the frame match still to compute
         self._matching: set[str] = set()  # ... being computed now
+        self.match_errors: dict[str, str] = {}  # views whose frame match failed: why, in one line
         self._sizes: dict[str, tuple[int, int]] = {}
         self.decoded = threading.Event()  # every view's frames are in the cache: ready to scrub
         self.done = threading.Event()  # ... and every view's PSNR and frame match are known (or failed)
@@ -311,8 +312,8 @@ class FrameStore(Notifying):
             self.psnr[view] = vm.psnr_db
             if self._on_video_metrics is not None:
                 self._on_video_metrics(vm)
-        except Exception:
-            pass  # the frames and the PSNR stand; the agreement plot stays without this view
+        except Exception as exc:  # the frames and the PSNR stand; the agreement plot says why it lacks this view
+            self.match_errors[view] = _one_line(exc)
         with self._lock:
             self._matching.discard(view)
             self._unmatched.discard(view)

@@ -121,6 +121,7 @@ class PlotPanel:
         self.agreement_plot: CursorPlot | None = None
         # each view's video-action agreement, once its video metrics are known
         self.agreements: dict[str, VideoAction] = {}
+        self._match_errors: tuple[tuple[str, str], ...] = ()  # (view, why) of the failed frame matches shown
         self._tl: RolloutTimeline | None = None
         self._cmp: RolloutTimeline | None = None
         self._psnr_views: tuple[str, ...] = ()
@@ -132,11 +133,11 @@ class PlotPanel:
             p.handle.remove()
         self._handles, self.plots = [], []
         self.joint_plot = self.psnr_plot = self.agreement_plot = None
-        self.agreements = {}
+        self.agreements, self._match_errors = {}, ()
         self._tl = None
 
     def build(self, tl: RolloutTimeline, compare: RolloutTimeline | None,
-              psnr: dict[str, np.ndarray | None]) -> None:
+              psnr: dict[str, np.ndarray | None], match_errors: dict[str, str] | None = None) -> None:
         """(Re)create every plot for ``tl`` (and the compared rollout, if any)."""
         self.clear()
         self._tl, self._cmp = tl, compare
@@ -198,6 +199,7 @@ class PlotPanel:
                 self.agreements = self._known_agreements()
                 x, lines, marks = self._agreement_xy()
                 self.agreement_plot = self._add(CursorPlot(gui, AGREEMENT_TITLE, x, lines, marks=marks, **common))
+                self.update_psnr(psnr, match_errors)  # a frame match that failed before: the title says so
 
     def _add(self, plot: CursorPlot) -> CursorPlot:
         self.plots.append(plot)
@@ -313,14 +315,17 @@ class PlotPanel:
                 parts.append(f"lag {view} {lag[f]:+.2f} s")
         return " · ".join(parts)
 
-    def update_psnr(self, psnr: dict[str, np.ndarray | None]) -> None:
-        """Redraw the PSNR and agreement plots once more views have their video metrics."""
+    def update_psnr(self, psnr: dict[str, np.ndarray | None], match_errors: dict[str, str] | None = None) -> None:
+        """Redraw the PSNR and agreement plots once more views have their video metrics (or
+        their frame match failed: the agreement plot's title says so)."""
         if self._tl is not None and self.agreement_plot is not None:
             known = self._known_views()
-            if known != tuple(self.agreements):
-                self.agreements = self._known_agreements()
+            failed = tuple(sorted((match_errors or {}).items()))
+            if known != tuple(self.agreements) or failed != self._match_errors:
+                self.agreements, self._match_errors = self._known_agreements(), failed
                 x, lines, marks = self._agreement_xy()
-                self.agreement_plot.set_lines(lines, x=x, marks=marks)
+                title = " · ".join([AGREEMENT_TITLE, *(f"{view}: no frame match ({why})" for view, why in failed)])
+                self.agreement_plot.set_lines(lines, x=x, marks=marks, title=title)
         if self.psnr_plot is None or self._tl is None:
             return
         if tuple(v for v, p in psnr.items() if p is not None) == self._psnr_views:

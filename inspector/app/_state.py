@@ -231,7 +231,7 @@ class TabState:
         cmp = self.compare
         self.video.set_views(loaded.frames.views)
         self.scene.show(loaded.scene, cmp.scene if cmp is not None else None)
-        self.plots.build(tl, cmp.timeline if cmp is not None else None, loaded.frames.psnr)
+        self.plots.build(tl, cmp.timeline if cmp is not None else None, loaded.frames.psnr, loaded.frames.match_errors)
         self._refresh_compare_info()
         if not keep_notes:
             self._load_notes()
@@ -671,7 +671,7 @@ class TabState:
                 return
             with self.client.atomic():
                 self._render_video()
-                self.plots.update_psnr(self.loaded.frames.psnr)
+                self.plots.update_psnr(self.loaded.frames.psnr, self.loaded.frames.match_errors)
                 self.plots.set_cursor(float(self.loaded.timeline.t_s[self.step]))
                 self._refresh_card()
 

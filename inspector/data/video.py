@@ -260,6 +260,7 @@ class ForwardReader:
     END_SLACK = 1
 
     def __init__(self, clip: VideoClip, on_frame: Callable[[int, npt.NDArray[np.uint8]], None] | None = None) -> None:
+        self.clip = clip
         self._frames = clip.iter_decoded()
         self._to_rgb = RgbConverter()
         self._on_frame = on_frame
@@ -304,6 +305,11 @@ class ForwardReader:
         if size not in self._rgb:
             self._rgb[size] = self._to_rgb(self._current[1], size)
         return self._rgb[size]
+
+    @property
+    def first_size(self) -> Size | None:
+        """The size ``on_frame`` sees frames at: the one first asked for (None: the clip's own)."""
+        return self._first_size
 
     def drain(self) -> None:
         """Read the rest of the clip (``on_frame`` sees every frame)."""
