@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -262,47 +265,52 @@ def test_the_recording_holds_both_gt_times_the_lag_and_the_split(tmp_path: Path)
     assert list(split_frames) == [0]  # 0.8 s ahead from the start: parted from chunk 0
 
 
-def test_the_app_plots_both_gt_times_marks_the_split_and_reads_the_lag(tmp_path: Path) -> None:
-    import time
-
+@contextlib.contextmanager
+def _opened_in_app(session: Path) -> Iterator[tuple[Any, Any]]:
+    """(app, tab): ``session`` served, its rollout "r" open in a tab with its video metrics done."""
     from test_app import connect, key
 
     from inspector.app import serve
 
-    n_gt = N_STEPS + 30
-    times = np.arange(n_gt, dtype=np.float64)
-    _write(tmp_path / "s", np.arange(N_STEPS) + 24, _scene(times), _joints(times))  # 0.8 s ahead
-    app = serve([tmp_path / "s"], port=0, block=False)
+    app = serve([session], port=0, block=False)
     try:
         client, tab = connect(app)
         with client:
             assert tab.open(key(app, "r"))
             assert tab.loaded.frames.done.wait(120)
-            deadline = time.monotonic() + 60
-            while "front" not in tab.plots.agreements:  # the plots follow the frames' callback
-                assert time.monotonic() < deadline, "no agreement after the video metrics"
-                time.sleep(0.05)
-            plot = tab.plots.agreement_plot
-            assert plot is not None
-            labels = [s["label"] for s in plot.handle.series]
-            assert "video's GT time, front" in labels and "joints' GT time" in labels
-            assert "front: video and actions part (chunk 0)" in labels
-            tab.set_step(40, force=True)
-            import re
-
-            read = re.search(r"lag front ([+-][\d.]+) s", tab.controls.readout.content)
-            assert read is not None and float(read.group(1)) == pytest.approx(0.8, abs=1.0 / FPS)
+            yield app, tab
     finally:
         app.stop()
+
+
+def test_the_app_plots_both_gt_times_marks_the_split_and_reads_the_lag(tmp_path: Path) -> None:
+    import re
+    import time
+
+    n_gt = N_STEPS + 30
+    times = np.arange(n_gt, dtype=np.float64)
+    _write(tmp_path / "s", np.arange(N_STEPS) + 24, _scene(times), _joints(times))  # 0.8 s ahead
+    with _opened_in_app(tmp_path / "s") as (_, tab):
+        deadline = time.monotonic() + 60
+        while "front" not in tab.plots.agreements:  # the plots follow the frames' callback
+            assert time.monotonic() < deadline, "no agreement after the video metrics"
+            time.sleep(0.05)
+        plot = tab.plots.agreement_plot
+        assert plot is not None
+        labels = [s["label"] for s in plot.handle.series]
+        assert "video's GT time, front" in labels and "joints' GT time" in labels
+        assert "front: video and actions part (chunk 0)" in labels
+        tab.set_step(40, force=True)
+        read = re.search(r"lag front ([+-][\d.]+) s", tab.controls.readout.content)
+        assert read is not None and float(read.group(1)) == pytest.approx(0.8, abs=1.0 / FPS)
 
 
 def test_a_frame_match_that_fails_in_the_app_is_named_on_the_plot(tmp_path: Path, monkeypatch) -> None:
     import time
 
-    from test_app import connect, key
+    from test_app import key
 
     from inspector.analysis.timeline import RolloutTimeline
-    from inspector.app import serve
     from inspector.errors import InspectorError
 
     times = np.arange(N_STEPS + 30, dtype=np.float64)
@@ -312,24 +320,17 @@ def test_a_frame_match_that_fails_in_the_app_is_named_on_the_plot(tmp_path: Path
         raise InspectorError(tmp_path / "gt_front.mp4", "frame 77 cannot be decoded")
 
     monkeypatch.setattr(RolloutTimeline, "video_metrics", broken)  # the fill streams the clips itself
-    app = serve([tmp_path / "s"], port=0, block=False)
-    try:
-        client, tab = connect(app)
-        with client:
-            assert tab.open(key(app, "r"))
-            assert tab.loaded.frames.done.wait(120)
-            assert tab.loaded.frames.psnr["front"] is not None  # the frames and the PSNR stand
-            plot = tab.plots.agreement_plot
-            assert plot is not None
-            deadline = time.monotonic() + 60
-            while "no frame match" not in plot.handle.title:  # the plots follow the frames' callback
-                assert time.monotonic() < deadline, f"the plot does not say the match failed: {plot.handle.title!r}"
-                time.sleep(0.05)
-            assert "front: no frame match (" in plot.handle.title and "frame 77 cannot be decoded" in plot.handle.title
-            tab.open(key(app, "r"))  # built again: it still says so
-            assert "frame 77 cannot be decoded" in tab.plots.agreement_plot.handle.title
-    finally:
-        app.stop()
+    with _opened_in_app(tmp_path / "s") as (app, tab):
+        assert tab.loaded.frames.psnr["front"] is not None  # the frames and the PSNR stand
+        plot = tab.plots.agreement_plot
+        assert plot is not None
+        deadline = time.monotonic() + 60
+        while "no frame match" not in plot.handle.title:  # the plots follow the frames' callback
+            assert time.monotonic() < deadline, f"the plot does not say the match failed: {plot.handle.title!r}"
+            time.sleep(0.05)
+        assert "front: no frame match (" in plot.handle.title and "frame 77 cannot be decoded" in plot.handle.title
+        tab.open(key(app, "r"))  # built again: it still says so
+        assert "frame 77 cannot be decoded" in tab.plots.agreement_plot.handle.title
 
 
 def test_the_app_shows_frames_before_matching_them_and_matches_only_what_a_tab_shows(tmp_path: Path) -> None:
