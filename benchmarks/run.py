@@ -1,6 +1,6 @@
 """Speed and memory of inspector as users run it, each beside a naive baseline measured in the same run.
 
-    python benchmarks/run.py [--quick] [--json FILE] [--only NAME...]
+    python benchmarks/run.py [--quick] [--json FILE] [--latest] [--only NAME...]
 
 The command-line figures time the ``inspector`` command as a whole process (start to exit) and
 take the peak of the summed RSS of its process tree (workers included), sampled every 20 ms;
@@ -10,8 +10,10 @@ it runs on two smaller subsets and its time and memory are extrapolated along th
 them (the table says so). The app's per-step figures (open, scrub) are server-side, in process.
 
 Prints a markdown table: figure, ours (time, peak RSS), naive baseline, ratio (baseline / ours),
-target, ok. Absolute times drift on a shared machine; ratios measured back to back are what to
-compare between runs. ``--quick`` uses fewer repetitions and smaller counts (a few minutes).
+target, ok (``benchmarks/table.py``); ``--latest`` merges the figures into ``benchmarks/latest.json``
+(replacing those of the same name) and rewrites the table in ``benchmarks/README.md``. Absolute
+times drift on a shared machine; ratios measured back to back are what to compare between runs.
+``--quick`` uses fewer repetitions and smaller counts (a few minutes).
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ DEMO = REPO / "sessions" / "demo"
 NAIVE = Path(__file__).resolve().parent / "naive.py"
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+import table  # noqa: E402
 from eval_session import make_eval_session  # noqa: E402
 
 
@@ -817,22 +820,13 @@ def bench_serve(tmp: Path, quick: bool) -> list[Figure]:
 # ----------------------------------------------------------------------------------------------
 
 
-def _fmt(value: float | None, unit: str) -> str:
-    if value is None:
-        return "-"
-    if unit == "configurations/s":
-        return f"{value / 1e6:.2f} M/s" if value >= 1e5 else f"{value / 1e3:.1f} k/s"
-    return f"{value:,.0f} {unit}" if abs(value) >= 1000 else f"{value:.3g} {unit}"
-
-
-def _mib(value: float | None) -> str:
-    return "-" if value is None else f"{value:,.0f} MiB"
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="smaller counts, fewer repetitions")
     parser.add_argument("--json", type=Path, help="also write the figures as JSON")
+    parser.add_argument("--latest", action="store_true",
+                        help="merge the figures into benchmarks/latest.json (by name) and rewrite the table in "
+                             "benchmarks/README.md")
     parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback keys groot eval clock")
     args = parser.parse_args(argv)
 
@@ -864,18 +858,14 @@ def main(argv: list[str] | None = None) -> int:
 
     machine = f"{os.cpu_count()} CPUs, Python {sys.version.split()[0]}"
     print(f"\nBenchmarks ({time.strftime('%Y-%m-%d')}, {machine}; ratio = baseline / ours)\n")
-    print("| figure | ours | peak RSS | naive baseline | baseline RSS | ratio | target | ok |")
-    print("|---|---|---|---|---|---|---|---|")
-    for f in figures:
-        ratio = "-" if f.ratio is None else f"{f.ratio:.1f}x"
-        ok = "yes" if f.ok else "**no**"
-        print(f"| {f.name} | {_fmt(f.ours, f.unit)} | {_mib(f.ours_rss_mib)} | {_fmt(f.baseline, f.unit)} | "
-              f"{_mib(f.baseline_rss_mib)} | {ratio} | {f.target} | {ok} |")
-    notes = [f"- `{f.name}`: {f.note}" for f in figures if f.note]
-    if notes:
-        print("\n" + "\n".join(notes))
+    rows = [{**asdict(f), "ratio": f.ratio} for f in figures]
+    print(table.markdown(rows), end="")
     if args.json:
-        args.json.write_text(json.dumps([{**asdict(f), "ratio": f.ratio} for f in figures], indent=2))
+        args.json.write_text(json.dumps(rows, indent=2) + "\n")
+    if args.latest:
+        latest = table.merge(table.load(), rows)
+        table.LATEST.write_text(json.dumps(latest, indent=2) + "\n")
+        table.write(latest)
     return 0
 
 

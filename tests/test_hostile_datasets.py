@@ -1,6 +1,6 @@
 """Hostile LeRobot datasets given directly to ``info``, ``report``, ``export`` and ``serve``.
 
-The contract (README, "code 2 and one line"): bad input is exit 2 and exactly one stderr line
+The contract (docs/reliability.md, "exit code 2 and one line"): bad input is exit 2 and exactly one stderr line
 ``error: <file>: <what>`` naming the file and the field; one broken episode never takes the others
 down; a failed export leaves no file and prints nothing else (rerun's own log lines included); a
 dataset kept as symlinks (the Hugging Face hub cache) reads like any other.

@@ -121,7 +121,7 @@ def test_frame_match_round_trips_through_json() -> None:
 
 # ----------------------------------------------------------------------------------------------
 # The match and the agreement work on every frame at once; these references read one frame at a
-# time, the way the definitions in the README say it.
+# time, the way the definitions in docs/metrics.md say it.
 
 
 def _reference_match(imagined: np.ndarray, gt: np.ndarray) -> tuple[np.ndarray, list[list[int]]]:

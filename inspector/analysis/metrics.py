@@ -1,4 +1,4 @@
-"""Drift metrics, exactly as the README's Metrics section defines them; vectorised, no loop over timesteps.
+"""Drift metrics, exactly as docs/metrics.md defines them; vectorised, no loop over timesteps.
 
 All joint-space figures are in the data's own units (arm degrees or -100..100, gripper 0..100):
 ``d(a, b) = ||a - b||_2`` over the 6 joints. Functions take a leading batch axis where it helps

@@ -12,7 +12,7 @@ serves both. Reopening a recently seen rollout finds its frames in the cache; fr
 since are decoded again in the background. The scrub path only looks frames up.
 
 The frame match of video-action agreement comes after: on the way it would delay the moment the
-rollout can be scrubbed (see the README's ``open`` benchmark), so once every view's frames are in, one worker
+rollout can be scrubbed (see the ``open`` note in benchmarks/README.md), so once every view's frames are in, one worker
 computes each view's video metrics as the report does (:meth:`RolloutTimeline.video_metrics`)
 and the agreement plot fills in. A rollout no tab shows any more is not matched until one does.
 """
