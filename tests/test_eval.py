@@ -482,3 +482,25 @@ def test_resume_redoes_a_broken_rollout_in_place(dataset: Path, tmp_path: Path) 
     assert (rollouts / mine / "notes.txt").read_text() == "mine"
     assert not [p for p in rollouts.iterdir() if p.name.startswith(".")]
     assert not [p for p in out.iterdir() if p.name.startswith(".")]
+
+
+def test_a_config_holding_arrays_survives_a_reconnection(dataset: Path, tmp_path: Path) -> None:
+    """The config a server sends again on reconnecting is compared whole (arrays, a NaN, nesting
+    as deep as msgpack goes); the session keeps what JSON can hold of it."""
+    import msgpack
+
+    out = tmp_path / "run"
+    config = {**DEFAULT_CONFIG, "reset_pose": np.arange(6.0), "scale": float("nan")}
+    handshake = packb(config)
+    deep = b"\xa4deep" + b"\x91" * 1000 + b"\x01"  # a list in a list ... 1000 deep
+    handshake = bytes([handshake[0] + 1]) + handshake[1:] + deep  # one more entry in the fixmap
+    assert msgpack.unpackb(handshake)["deep"]
+    with policy_server(handshake=handshake, faults={0: "close"}) as server:
+        done = run_cli("eval", server.url, str(dataset), "-o", str(out), "--samples", "2")
+    assert done.returncode == 2, done.stderr
+    lines = error_lines(done.stderr)
+    assert len(lines) == 1 and lines[0].startswith("error: ep000_f0000: the server closed the connection")
+    assert len(open_session(out).rollouts) == 3 and server.connections == 2
+    stored = open_session(out).model["server_config"]
+    assert stored["reset_pose"] == [0, 1, 2, 3, 4, 5] and stored["scale"] == "nan"
+    assert json.dumps(stored["deep"]) == "[" * 16 + '"..."' + "]" * 16

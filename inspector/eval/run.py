@@ -16,6 +16,7 @@ again and replaced atomically.
 from __future__ import annotations
 
 import json
+import math
 import os
 import sys
 import time
@@ -296,10 +297,28 @@ def _check_same_dataset(existing: Existing, dataset: LeRobotDataset) -> None:
                              "--resume continues a run on the same dataset")
 
 
-def _json_safe(value: Any) -> Any:
-    """A server's config as JSON can hold it (bytes and unknown types as text)."""
-    return json.loads(json.dumps(value, default=lambda v: v.decode("utf-8", "replace") if isinstance(v, bytes)
-                                 else v.tolist() if isinstance(v, np.ndarray) else str(v)))
+MAX_CONFIG_DEPTH = 16  # a server's config nested deeper is shown as "..." (msgpack nests to 1023)
+
+
+def _json_safe(value: Any, depth: int = 0) -> Any:
+    """A server's config as JSON can hold it: arrays as lists, bytes as text, a non-finite number
+    as its name (JSON has none), whatever else as its type's name, nesting past
+    :data:`MAX_CONFIG_DEPTH` as ``"..."`` (the same value always gives the same result)."""
+    if depth > MAX_CONFIG_DEPTH:
+        return "..."
+    if isinstance(value, (np.ndarray, np.generic)):
+        value = value.tolist()
+    if isinstance(value, dict):
+        return {str(_json_safe(k, depth + 1)): _json_safe(v, depth + 1) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v, depth + 1) for v in value]
+    if isinstance(value, bytes):
+        return value.decode("utf-8", "replace")
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    return type(value).__name__  # msgpack's ExtType, Timestamp
 
 
 def evaluate(plan: EvalPlan, log: Callable[[str], None] = lambda line: print(line, file=sys.stderr),
@@ -332,7 +351,8 @@ def evaluate(plan: EvalPlan, log: Callable[[str], None] = lambda line: print(lin
         raise
     video_keys = plan.video_keys if plan.video_keys is not None else (
         {DEFAULT_VIDEO_KEY: next(iter(cameras.values()))} if cameras else {})
-    log(shorten(f"server {url}: {', '.join(f'{k} {shorten(v, 80)}' for k, v in config.raw.items())}", 600))
+    shown = _json_safe(config.raw)
+    log(shorten(f"server {url}: {', '.join(f'{k} {shorten(json.dumps(v), 80)}' for k, v in shown.items())}", 600))
     log("cameras: " + (", ".join(f"{key} <- {name}" for key, name in cameras.items()) or "none"))
     try:
         writer = open_output(plan, existing, dataset, config, url, cameras)
@@ -373,8 +393,9 @@ def evaluate(plan: EvalPlan, log: Callable[[str], None] = lambda line: print(lin
             try:
                 if client is None:
                     client = PolicyClient(url, plan.timeout_s, plan.max_reply_bytes)
-                    if client.config != config:
-                        raise SampleError(f"the server's config changed on reconnecting: {client.config.raw}")
+                    if _json_safe(client.config.raw) != _json_safe(config.raw):  # arrays compared by value
+                        raise SampleError("the server's config changed on reconnecting: "
+                                          f"{json.dumps(_json_safe(client.config.raw))}")
                 waited = _one_sample(plan, dataset, sample, client, cameras, video_keys,
                                      lambda k: prefetch.get(int(first_request[i]) + k), writer, result, url,
                                      redo=sample.tag in broken)
