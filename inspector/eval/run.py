@@ -34,6 +34,7 @@ from ..data.session import (
     ROLLOUTS_DIR,
     SESSION_FILE,
     RolloutKind,
+    Session,
     SessionWriter,
     is_session,
     load_rollout,
@@ -201,7 +202,7 @@ class Existing:
         broken: tag -> why, for the rollout directories that do not (asked again, replaced).
     """
 
-    session: Any
+    session: Session
     done: set[str]
     broken: dict[str, str]
 
