@@ -168,7 +168,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
                     cameras=dict(args.camera or []),
                     prompt=args.prompt, timeout_s=args.timeout, resume=args.resume,
                     executed_per_chunk=args.executed_per_chunk,
-                    video_keys=dict(args.video) if args.video else None, model=model)
+                    video_keys=dict(args.video) if args.video else None, model=model,
+                    max_reply_mb=args.max_reply_mb)
     result = evaluate(plan)
     print(format_result(result))
     return 0 if result.ok else EXIT_BAD_INPUT
@@ -468,6 +469,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="keep the reply's predicted frames under KEY as view VIEW (default: video=<first camera>)")
     p.add_argument("--model", help="the model's name in the session (default: the server address)")
     p.add_argument("--checkpoint", help="the checkpoint's name in the session")
+    p.add_argument("--max-reply-mb", type=_positive_float, default=128.0, metavar="MB",
+                   help="refuse a reply (or handshake) larger than MB megabytes, unread: that sample fails "
+                        "(default 128: 80 times DreamZero-SO101's reply with its predicted video)")
     p.set_defaults(func=_cmd_eval)
 
     p = sub.add_parser("demo", help="rebuild the bundled demo session")

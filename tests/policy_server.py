@@ -6,10 +6,16 @@ Each ``infer`` is answered with the received state plus :func:`ramp` (so the chu
 against the dataset is known exactly), as an array (N, 6) or as the SO-101 map
 ``{"action.joint_position": (N, 5), "action.gripper_position": (N, 1)}``. Faults are planted by
 the index of the ``infer`` request they answer (0, 1, ...).
+
+It misbehaves on purpose too: a handshake of any bytes (``handshake``), and replies a client must
+refuse: an object array (``"object"``: its bytes would be read as pointers), a chunk of
+``long_rows`` steps (``"long"``), or one of ``huge_rows`` steps (``"huge"``, 8.3 million by
+default: 400 MB, streamed in 1 MiB fragments so that the server never holds it).
 """
 
 from __future__ import annotations
 
+import struct
 import threading
 import time
 import traceback
@@ -22,7 +28,25 @@ import numpy as np
 
 from inspector.eval.wire import packb, unpackb
 
-FAULTS = ("traceback", "close", "slow", "shape", "nan")
+FAULTS = ("traceback", "close", "slow", "shape", "nan", "object", "long", "huge")
+HUGE_ROWS = 8_300_000  # a chunk of 400 MB in float64
+
+
+def object_array(shape: tuple[int, ...]) -> dict[bytes, Any]:
+    """The wire encoding of an array of dtype object, its bytes 0x41...: read as an array they
+    are pointers to nowhere (openpi-client's packer refuses to send one; a hostile server may)."""
+    return {b"__ndarray__": True, b"data": b"A" * 8 * int(np.prod(shape)), b"dtype": "|O", b"shape": list(shape)}
+
+
+def streamed_chunk(rows: int, piece: int = 1 << 20) -> Iterator[bytes]:
+    """A reply (rows, 6) float64 of zeros in pieces of ``piece`` bytes: a websocket message sent as
+    fragments, never whole in memory."""
+    size = rows * 6 * 8
+    yield (b"\x84" + packb(b"__ndarray__") + packb(True) + packb(b"dtype") + packb("<f8") + packb(b"shape")
+           + packb([rows, 6]) + packb(b"data") + b"\xc6" + struct.pack(">I", size))
+    zeros = bytes(piece)
+    for start in range(0, size, piece):
+        yield zeros if start + piece <= size else zeros[:size - start]
 
 
 def ramp(horizon: int) -> np.ndarray:
@@ -56,6 +80,9 @@ class PolicyServer:
     delay_s: float = 0.0  # every infer waits this long first
     video: tuple[int, int, int] | None = None  # (T, H, W) predicted frames under "video" (map form)
     echo: bool = False  # answer a fixed chunk at once, nothing recorded (benchmark)
+    handshake: bytes | None = None  # sent on connect instead of the packed config
+    long_rows: int = 5000  # steps of a "long" reply
+    huge_rows: int = HUGE_ROWS  # steps of a "huge" reply
     infers: list[Received] = field(default_factory=list)
     resets: list[str] = field(default_factory=list)
     connections: int = 0
@@ -75,6 +102,8 @@ class PolicyServer:
             chunk = np.zeros((self.horizon, 8), np.float32)
         if fault == "nan":
             chunk[3, 2] = np.nan
+        if fault == "long":
+            chunk = np.resize(chunk, (self.long_rows, 6))
         if self.form == "array":
             return chunk
         out: dict[str, Any] = {"action.joint_position": chunk[:, :-1], "action.gripper_position": chunk[:, -1:]}
@@ -88,7 +117,7 @@ class PolicyServer:
 
         with self._lock:
             self.connections += 1
-        ws.send(packb(self.config))
+        ws.send(self.handshake if self.handshake is not None else packb(self.config))
         while True:
             try:
                 obs = unpackb(ws.recv())
@@ -123,7 +152,12 @@ class PolicyServer:
                     time.sleep(self.slow_s)
                 if self.delay_s:
                     time.sleep(self.delay_s)
-                ws.send(packb(self.reply(obs, fault)))
+                if fault == "object":
+                    ws.send(packb(object_array((self.horizon, 6))))
+                elif fault == "huge":
+                    ws.send(streamed_chunk(self.huge_rows))
+                else:
+                    ws.send(packb(self.reply(obs, fault)))
             except ConnectionClosed:
                 return
             except Exception:

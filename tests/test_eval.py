@@ -17,10 +17,11 @@ import pytest
 
 from inspector.data import open_dataset, open_session
 from inspector.data.lerobot_writer import EpisodeData, write_lerobot_dataset
+from inspector.eval.wire import packb
 from inspector.units import JOINT_NAMES
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from policy_server import DEFAULT_CONFIG, policy_server, ramp  # noqa: E402
+from policy_server import DEFAULT_CONFIG, object_array, policy_server, ramp  # noqa: E402
 
 LENGTHS = (60, 45)
 HORIZON = 24
@@ -308,3 +309,198 @@ def test_lerobot_written_datasets_send_their_own_frames(fixtures_dir: Path, tmp_
         for key, camera in zip(keys, cameras):
             np.testing.assert_array_equal(received.images[key], episode.frame(camera, f))
         np.testing.assert_array_equal(received.joint_position, episode.state[f, :5])
+
+
+# ==============================================================================================
+# Servers that misbehave on purpose: what they send is refused as one line, nothing lost
+
+def test_object_arrays_from_a_server_are_refused_as_one_line(dataset: Path, tmp_path: Path) -> None:
+    """An array of dtype object (its bytes would be read as pointers: a crash) in the handshake
+    stops the run before anything is written; in a reply, it is that sample's line."""
+    config = {**DEFAULT_CONFIG, "calibration": object_array((4,))}
+    with policy_server(handshake=packb(config)) as server:
+        done = run_cli("eval", server.url, str(dataset), "-o", str(tmp_path / "x"), "--samples", "1")
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.startswith(f"error: {server.url}: handshake: not a msgpack_numpy message")
+    assert "dtype '|O'" in done.stderr and len(done.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "x").exists()
+
+    out = tmp_path / "run"
+    with policy_server(faults={1: "object"}) as server:
+        done = run_cli("eval", server.url, str(dataset), "-o", str(out), "--samples", "2")
+    assert done.returncode == 2, done.stderr
+    lines = error_lines(done.stderr)
+    assert len(lines) == 1 and lines[0].startswith("error: ep000_f0036: reply: not a msgpack_numpy message")
+    assert "dtype '|O'" in lines[0] and "only boolean, integer and float arrays" in lines[0]
+    session = open_session(out)
+    assert sorted(session.rollouts) == ["ep000_f0000", "ep001_f0000", "ep001_f0021"] and not session.errors
+
+
+def _run_measured(args: list[str], tmp_path: Path) -> tuple[int, str, str, float]:
+    """The CLI run as a child process: exit code, stdout, stderr and its peak RSS [MB]."""
+    with open(tmp_path / "stdout", "w") as out, open(tmp_path / "stderr", "w") as err:
+        proc = subprocess.Popen([sys.executable, "-m", "inspector", *args], stdout=out, stderr=err)
+    deadline = time.monotonic() + DEADLINE_S
+    while True:
+        pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+        if pid:
+            break
+        if time.monotonic() > deadline:
+            proc.kill()
+            os.wait4(proc.pid, 0)
+            raise AssertionError(f"{args} ran past {DEADLINE_S} s")
+        time.sleep(0.05)
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    return (proc.returncode, (tmp_path / "stdout").read_text(), (tmp_path / "stderr").read_text(),
+            usage.ru_maxrss / 1024)
+
+
+def test_replies_larger_than_a_chunk_are_refused_and_memory_stays_bounded(dataset: Path, tmp_path: Path) -> None:
+    """A chunk of 5000 steps is that sample's line; so is one of 8.3 million (400 MB, streamed):
+    refused from its frame headers past --max-reply-mb, so that the client never holds it."""
+    out = tmp_path / "run"
+    with policy_server(faults={0: "long", 2: "huge"}, long_rows=5000) as server:
+        code, stdout, stderr, peak_mb = _run_measured(
+            ["eval", server.url, str(dataset), "-o", str(out), "--samples", "2"], tmp_path)
+    assert code == 2, stderr
+    lines = error_lines(stderr)
+    assert lines == ["error: ep000_f0000: reply: action chunk: 5000 steps, more than the 1000 a chunk may have",
+                     "error: ep001_f0000: the reply is larger than 128 MB, refused unread (--max-reply-mb raises "
+                     "the limit)"], stderr
+    session = open_session(out)
+    assert sorted(session.rollouts) == ["ep000_f0036", "ep001_f0021"] and not session.errors
+    assert sum(f.stat().st_size for f in out.rglob("*") if f.is_file()) < 1_000_000
+    assert "2 failed" in stdout
+    # the whole process, 128 MB of the reply read included (the old client read all 400 MB,
+    # then converted them: 1.4 GB)
+    assert peak_mb < 600, f"peak RSS {peak_mb:.0f} MB"
+
+
+def test_max_reply_mb_sets_the_largest_reply(dataset: Path, tmp_path: Path) -> None:
+    """A reply with predicted video of 1.1 MB: refused under --max-reply-mb 1, kept under 2; a replay
+    of five such chunks is refused under 2."""
+    with policy_server(form="map", video=(30, 96, 128)) as server:
+        small = run_cli("eval", server.url, str(dataset), "-o", str(tmp_path / "a"), "--episodes", "1",
+                        "--frames", "3", "--max-reply-mb", "1")
+        enough = run_cli("eval", server.url, str(dataset), "-o", str(tmp_path / "b"), "--episodes", "1",
+                         "--frames", "3", "--max-reply-mb", "2")
+    assert small.returncode == 2 and error_lines(small.stderr) == [
+        "error: ep001_f0003: the reply is larger than 1 MB, refused unread (--max-reply-mb raises the limit)"]
+    assert not open_session(tmp_path / "a").rollouts
+    assert enough.returncode == 0, enough.stderr
+    assert open_session(tmp_path / "b").rollouts["ep001_f0003"].views == ["front"]
+    # a replay holds its chunks' predicted frames until it is written: at most twice the limit
+    with policy_server(form="map", video=(30, 96, 128)) as server:
+        replay = run_cli("eval", server.url, str(dataset), "-o", str(tmp_path / "d"), "--episodes", "1",
+                         "--every-chunk", "--max-reply-mb", "2")
+    assert replay.returncode == 2 and error_lines(replay.stderr) == [
+        "error: ep001_replay: reply: the predicted frames of this replay pass 4 MB by the chunk at frame 27 "
+        "(twice --max-reply-mb)"]
+    for value in ("0", "-1", "inf", "lots"):
+        bad = run_cli("eval", "127.0.0.1:1", str(dataset), "-o", str(tmp_path / "c"), "--max-reply-mb", value)
+        assert bad.returncode == 2 and bad.stderr.startswith("error: --max-reply-mb: "), bad.stderr
+
+
+def test_an_output_that_is_no_session_is_refused_before_the_server_is_asked(dataset: Path, tmp_path: Path) -> None:
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("keep me")
+    a_file = tmp_path / "a_file"
+    a_file.write_text("keep me too")
+    with policy_server() as server:
+        runs = {
+            "directory": run_cli("eval", server.url, str(dataset), "-o", str(mine), "--samples", "1"),
+            "directory --resume": run_cli("eval", server.url, str(dataset), "-o", str(mine), "--samples", "1",
+                                          "--resume"),
+            "file": run_cli("eval", server.url, str(dataset), "-o", str(a_file), "--samples", "1"),
+            "under a file": run_cli("eval", server.url, str(dataset), "-o", str(a_file / "run"), "--samples", "1"),
+        }
+        assert server.connections == 0  # refused before any network traffic
+    for name, done in runs.items():
+        assert done.returncode == 2, name
+        assert len(done.stderr.strip().splitlines()) == 1 and done.stderr.startswith("error: "), (name, done.stderr)
+        assert "--overwrite" not in done.stderr, name  # eval has no such flag
+    assert runs["directory"].stderr.strip() == (
+        f"error: {mine}: is a directory that is not a session (no session.json); eval writes a new session where "
+        "nothing is (or into an empty directory), and --resume continues a session; choose another -o")
+    assert runs["directory --resume"].stderr == runs["directory"].stderr
+    assert runs["file"].stderr.startswith(f"error: {a_file}: exists and is a file, not a session;")
+    assert runs["under a file"].stderr.strip() == (
+        f"error: {a_file / 'run'}: cannot be created: {a_file} is a file, not a directory")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "mine"]
+    assert [p.name for p in mine.iterdir()] == ["notes.txt"] and (mine / "notes.txt").read_text() == "keep me"
+    assert a_file.read_text() == "keep me too"
+    # an empty directory is a place for a new session
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with policy_server() as server:
+        done = run_cli("eval", server.url, str(dataset), "-o", str(empty), "--episodes", "1", "--frames", "0")
+    assert done.returncode == 0, done.stderr
+    assert sorted(open_session(empty).rollouts) == ["ep001_f0000"]
+
+
+def test_resume_redoes_a_broken_rollout_in_place(dataset: Path, tmp_path: Path) -> None:
+    """A truncated actions.npy, a rollout.json cut short, a NaN written over a value: each is
+    asked again and replaced; a directory without rollout.json is the user's, left alone."""
+    out = tmp_path / "run"
+    with policy_server() as server:
+        first = run_cli("eval", server.url, str(dataset), "-o", str(out), "--samples", "3")
+    assert first.returncode == 0, first.stderr
+    tags = sorted(open_session(out).rollouts)
+    assert len(tags) == 6
+    rollouts = out / "rollouts"
+    truncated, cut, nan, mine = tags[0], tags[2], tags[3], tags[5]
+    actions = rollouts / truncated / "actions.npy"
+    actions.write_bytes(actions.read_bytes()[:200])
+    meta = rollouts / cut / "rollout.json"
+    meta.write_bytes(meta.read_bytes()[:30])
+    values = np.load(rollouts / nan / "actions.npy")
+    values[0, 5, 1] = np.nan
+    np.save(rollouts / nan / "actions.npy", values)
+    for f in (rollouts / mine).iterdir():
+        f.unlink()
+    (rollouts / mine / "notes.txt").write_text("mine")
+    assert len(open_session(out).errors) == 4
+
+    with policy_server() as server:
+        resumed = run_cli("eval", server.url, str(dataset), "-o", str(out), "--samples", "3", "--resume")
+    assert resumed.returncode == 2, resumed.stderr
+    assert error_lines(resumed.stderr) == [
+        f"error: {mine}: {rollouts / mine} is a directory without rollout.json, not a rollout: --resume replaces "
+        "only a broken rollout; move it away to ask for this sample again"]
+    assert f"redo {truncated}: {actions}: " in resumed.stderr
+    assert (f"3 rollout(s) written, 3 broken rollouts redone ({', '.join(sorted([truncated, cut, nan]))}), "
+            "2 already there (--resume), 1 failed") in resumed.stdout
+    assert len(server.infers) == 3  # the broken ones, asked again
+    session = open_session(out)
+    assert sorted(session.rollouts) == sorted(set(tags) - {mine}) and list(session.errors) == [mine]
+    ds = open_dataset(dataset)
+    for tag in (truncated, cut, nan):
+        e, f = int(tag[2:5]), int(tag[7:])
+        np.testing.assert_array_equal(session.rollouts[tag].actions[0],
+                                      (ds.episode(e).state[f] + ramp(HORIZON)).astype(np.float32))
+    assert (rollouts / mine / "notes.txt").read_text() == "mine"
+    assert not [p for p in rollouts.iterdir() if p.name.startswith(".")]
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]
+
+
+def test_a_config_holding_arrays_survives_a_reconnection(dataset: Path, tmp_path: Path) -> None:
+    """The config a server sends again on reconnecting is compared whole (arrays, a NaN, nesting
+    as deep as msgpack goes); the session keeps what JSON can hold of it."""
+    import msgpack
+
+    out = tmp_path / "run"
+    config = {**DEFAULT_CONFIG, "reset_pose": np.arange(6.0), "scale": float("nan")}
+    handshake = packb(config)
+    deep = b"\xa4deep" + b"\x91" * 1000 + b"\x01"  # a list in a list ... 1000 deep
+    handshake = bytes([handshake[0] + 1]) + handshake[1:] + deep  # one more entry in the fixmap
+    assert msgpack.unpackb(handshake)["deep"]
+    with policy_server(handshake=handshake, faults={0: "close"}) as server:
+        done = run_cli("eval", server.url, str(dataset), "-o", str(out), "--samples", "2")
+    assert done.returncode == 2, done.stderr
+    lines = error_lines(done.stderr)
+    assert len(lines) == 1 and lines[0].startswith("error: ep000_f0000: the server closed the connection")
+    assert len(open_session(out).rollouts) == 3 and server.connections == 2
+    stored = open_session(out).model["server_config"]
+    assert stored["reset_pose"] == [0, 1, 2, 3, 4, 5] and stored["scale"] == "nan"
+    assert json.dumps(stored["deep"]) == "[" * 16 + '"..."' + "]" * 16

@@ -6,11 +6,18 @@ single-chunk rollout of the session, its GT the dataset's. So an interrupted run
 finished sample and ``--resume`` goes on with the others. A sample that fails (an error reply, no
 reply in time, a closed connection, a bad chunk) is one line; the run goes on (reconnecting where
 the server closed) and ends with exit code 2.
+
+The destination is checked before the dataset is read or the server contacted: a new session
+goes where nothing is (or into an empty directory); ``--resume`` continues a session, each of
+its rollouts read and validated first, and a broken one (a truncated file, a bad value) is asked
+again and replaced atomically.
 """
 
 from __future__ import annotations
 
 import json
+import math
+import os
 import sys
 import time
 import uuid
@@ -22,12 +29,24 @@ from typing import Any
 import numpy as np
 
 from ..data.lerobot_dataset import Episode, LeRobotDataset, dataset_name, find_dataset, open_dataset
-from ..data.session import SESSION_FILE, RolloutKind, SessionWriter, is_session, open_session
-from ..errors import InspectorError, one_line
+from ..data.session import (
+    ROLLOUT_FILE,
+    ROLLOUTS_DIR,
+    SESSION_FILE,
+    RolloutKind,
+    Session,
+    SessionWriter,
+    is_session,
+    load_rollout,
+    read_session,
+    rollout_dirs,
+)
+from ..data.video import probe
+from ..errors import InspectorError
 from ..progress import progress_bar
-from .client import PolicyClient, SampleError, ServerConfig, server_url
+from .client import DEFAULT_MAX_REPLY_MB, PolicyClient, SampleError, ServerConfig, server_url, shorten
 from .observation import FrameReader, Observation, Prefetcher, map_cameras
-from .replies import ReplyError, chunk_from_reply
+from .replies import MAX_HORIZON, ReplyError, chunk_from_reply
 
 DEFAULT_SAMPLES = 8  # start frames per episode: the seed's zero-shot protocol
 # Frames of GT left after the last evenly spaced start (the DreamZero-SO101 horizon) [steps].
@@ -79,6 +98,8 @@ class EvalPlan:
         video_keys: reply key -> view name of predicted frames to keep (None: ``video`` as the
             first mapped camera).
         model: the ``model`` record of the session (name, checkpoint).
+        max_reply_mb: the largest message accepted from the server [MB]; also bounds the
+            predicted frames a replay holds before it is written (twice this).
     """
 
     server: str
@@ -95,6 +116,11 @@ class EvalPlan:
     executed_per_chunk: int = DEFAULT_EXECUTED
     video_keys: dict[str, str] | None = None
     model: dict[str, Any] = field(default_factory=dict)
+    max_reply_mb: float = DEFAULT_MAX_REPLY_MB
+
+    @property
+    def max_reply_bytes(self) -> int:
+        return max(1, int(self.max_reply_mb * 1e6))
 
 
 @dataclass
@@ -105,6 +131,7 @@ class EvalResult:
         session: the session directory.
         written: tags written by this run.
         skipped: tags already in the session (``--resume``).
+        redone: tags among ``written`` whose rollout was in the session but broken (``--resume``).
         failed: tag -> one line saying why.
         latency_s: per request of a written sample, from sending ``infer`` to its reply [s].
         client_s: per written sample and request, the time spent outside the server's replies [s].
@@ -114,6 +141,7 @@ class EvalResult:
     session: Path
     written: list[str] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
+    redone: list[str] = field(default_factory=list)
     failed: dict[str, str] = field(default_factory=dict)
     latency_s: list[float] = field(default_factory=list)
     client_s: list[float] = field(default_factory=list)
@@ -156,44 +184,142 @@ def plan_samples(dataset: LeRobotDataset, episodes: Sequence[int] | None, sample
     return out
 
 
-def connect(url: str, timeout_s: float) -> PolicyClient:
+def connect(url: str, timeout_s: float, max_reply_bytes: int) -> PolicyClient:
     """A connection, or the one-line reason there is none as an :class:`InspectorError`."""
     try:
-        return PolicyClient(url, timeout_s)
+        return PolicyClient(url, timeout_s, max_reply_bytes)
     except SampleError as exc:
         raise InspectorError(url, str(exc)) from None
 
 
-def open_output(plan: EvalPlan, dataset: LeRobotDataset, config: ServerConfig, url: str,
-                cameras: Mapping[str, str]) -> tuple[SessionWriter, set[str]]:
-    """The session to write into (created now, empty, so every sample lands in place as it is
-    done) and the tags it already holds.
+@dataclass
+class Existing:
+    """What ``--resume`` found in the session at ``-o``.
+
+    Attributes:
+        session: its ``session.json``, read.
+        done: tags of the rollouts that read back whole (validated as ``report`` reads them).
+        broken: tag -> why, for the rollout directories that do not (asked again, replaced).
+    """
+
+    session: Session
+    done: set[str]
+    broken: dict[str, str]
+
+
+NEW_OUTPUT_ADVICE = ("eval writes a new session where nothing is (or into an empty directory), and --resume "
+                     "continues a session; choose another -o")
+
+
+def check_output(plan: EvalPlan) -> Existing | None:
+    """Where the session goes, checked before the dataset is read or the server contacted.
+
+    Returns:
+        None for a new session (nothing at ``-o``, or an empty directory); with ``--resume`` and a
+        session there, what it holds.
 
     Raises:
-        InspectorError: the output exists without ``--resume``, or holds another dataset's samples.
+        InspectorError: ``-o`` is a session without ``--resume``, a file, a directory that is not a
+            session, or cannot be created; with ``--resume``, a ``session.json`` that cannot be read.
     """
     out = Path(plan.output)
-    dataset_root = str(Path(dataset.root).resolve())
-    if plan.resume and is_session(out):
-        session = open_session(out, lazy=True)
-        theirs = session.gt_source.get("dataset")
-        if theirs is not None and str(Path(theirs).resolve()) != dataset_root:
-            raise InspectorError(out / SESSION_FILE, f"holds samples of dataset {theirs}, not {dataset_root}; "
-                                                     "--resume continues a run on the same dataset")
-        return SessionWriter.append(out), {*session.rollouts, *session.errors}
     if is_session(out):
-        raise InspectorError(out, "already exists (pass --resume to continue it)")
+        if not plan.resume:
+            raise InspectorError(out, "already exists (pass --resume to continue it)")
+        return _read_existing(out)
+    if os.path.lexists(out):
+        if out.is_symlink() or not out.is_dir():
+            what = "a symbolic link" if out.is_symlink() else "a file"
+            raise InspectorError(out, f"exists and is {what}, not a session; {NEW_OUTPUT_ADVICE}")
+        try:
+            empty = not any(out.iterdir())
+        except OSError as exc:
+            raise InspectorError(out, f"cannot read ({exc.strerror or exc})") from None
+        if not empty:
+            raise InspectorError(out, f"is a directory that is not a session (no {SESSION_FILE}); {NEW_OUTPUT_ADVICE}")
+        return None
+    parent = out.absolute().parent
+    while not os.path.lexists(parent):
+        parent = parent.parent
+    if not parent.is_dir():
+        raise InspectorError(out, f"cannot be created: {parent} is a file, not a directory")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise InspectorError(out, f"cannot be created: {parent} is not writable")
+    return None
+
+
+def _read_existing(out: Path) -> Existing:
+    """Every rollout of the session at ``out`` read back: its arrays' shapes and values, its
+    videos' headers, a horizon a reply may have."""
+    session = read_session(out)
+    done: set[str] = set()
+    broken: dict[str, str] = {}
+    for child in rollout_dirs(out):
+        try:
+            rollout = load_rollout(child, session.units, lazy=True)
+            if rollout.horizon > MAX_HORIZON:
+                raise InspectorError(child / ROLLOUT_FILE, f"horizon: {rollout.horizon} steps, more than the "
+                                                           f"{MAX_HORIZON} a reply may have")
+            _ = (rollout.actions, rollout.states, rollout.gt_actions)  # read now: a bad value fails here
+            rollout.release_arrays()
+            for view in rollout.views:
+                probe(rollout.video_path(view))
+        except InspectorError as exc:
+            broken[child.name] = str(exc)
+            continue
+        done.add(child.name)
+    return Existing(session, done, broken)
+
+
+def open_output(plan: EvalPlan, existing: Existing | None, dataset: LeRobotDataset, config: ServerConfig,
+                url: str, cameras: Mapping[str, str]) -> SessionWriter:
+    """The session to write into: ``existing`` (checked by :func:`check_output`), or a new one
+    created now, empty, so every sample lands in place as it is done.
+
+    Raises:
+        InspectorError: the new session's place was taken meanwhile.
+    """
+    out = Path(plan.output)
+    if existing is not None:
+        return SessionWriter(out, None, existing.session.units)
     model = {"name": url, **plan.model, "server": url, "server_config": _json_safe(config.raw),
              "cameras": dict(cameras)}
-    writer = SessionWriter.create(out, units=dataset.units, model=model, dataset=dataset_root)
+    writer = SessionWriter.create(out, units=dataset.units, model=model, dataset=str(Path(dataset.root).resolve()))
     writer.commit()
-    return SessionWriter.append(out), set()
+    return SessionWriter(out, None, dataset.units)
 
 
-def _json_safe(value: Any) -> Any:
-    """A server's config as JSON can hold it (bytes and unknown types as text)."""
-    return json.loads(json.dumps(value, default=lambda v: v.decode("utf-8", "replace") if isinstance(v, bytes)
-                                 else v.tolist() if isinstance(v, np.ndarray) else str(v)))
+def _check_same_dataset(existing: Existing, dataset: LeRobotDataset) -> None:
+    dataset_root = str(Path(dataset.root).resolve())
+    theirs = existing.session.gt_source.get("dataset")
+    if theirs is not None and str(Path(theirs).resolve()) != dataset_root:
+        raise InspectorError(existing.session.root / SESSION_FILE,
+                             f"holds samples of dataset {shorten(theirs)}, not {dataset_root}; "
+                             "--resume continues a run on the same dataset")
+
+
+MAX_CONFIG_DEPTH = 16  # a server's config nested deeper is shown as "..." (msgpack nests to 1023)
+
+
+def _json_safe(value: Any, depth: int = 0) -> Any:
+    """A server's config as JSON can hold it: arrays as lists, bytes as text, a non-finite number
+    as its name (JSON has none), whatever else as its type's name, nesting past
+    :data:`MAX_CONFIG_DEPTH` as ``"..."`` (the same value always gives the same result)."""
+    if depth > MAX_CONFIG_DEPTH:
+        return "..."
+    if isinstance(value, (np.ndarray, np.generic)):
+        value = value.tolist()
+    if isinstance(value, dict):
+        return {str(_json_safe(k, depth + 1)): _json_safe(v, depth + 1) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v, depth + 1) for v in value]
+    if isinstance(value, bytes):
+        return value.decode("utf-8", "replace")
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    return type(value).__name__  # msgpack's ExtType, Timestamp
 
 
 def evaluate(plan: EvalPlan, log: Callable[[str], None] = lambda line: print(line, file=sys.stderr),
@@ -210,12 +336,13 @@ def evaluate(plan: EvalPlan, log: Callable[[str], None] = lambda line: print(lin
             mapping, the output); a failed sample is never raised, it is in ``failed``.
     """
     url = server_url(plan.server)
-    if is_session(plan.output) and not plan.resume:  # before the server is bothered
-        raise InspectorError(plan.output, "already exists (pass --resume to continue it)")
+    existing = check_output(plan)  # before the dataset is read and the server bothered
     dataset = open_dataset(find_dataset(plan.dataset))
+    if existing is not None:
+        _check_same_dataset(existing, dataset)
     samples = plan_samples(dataset, plan.episodes, plan.samples, plan.frames,
                            plan.executed_per_chunk if plan.every_chunk else None)
-    client: PolicyClient | None = connect(url, plan.timeout_s)
+    client: PolicyClient | None = connect(url, plan.timeout_s, plan.max_reply_bytes)
     assert client is not None
     config = client.config
     try:
@@ -225,16 +352,24 @@ def evaluate(plan: EvalPlan, log: Callable[[str], None] = lambda line: print(lin
         raise
     video_keys = plan.video_keys if plan.video_keys is not None else (
         {DEFAULT_VIDEO_KEY: next(iter(cameras.values()))} if cameras else {})
-    log(f"server {url}: {', '.join(f'{k} {v}' for k, v in config.raw.items())}")
+    shown = _json_safe(config.raw)
+    log(shorten(f"server {url}: {', '.join(f'{k} {shorten(json.dumps(v), 80)}' for k, v in shown.items())}", 600))
     log("cameras: " + (", ".join(f"{key} <- {name}" for key, name in cameras.items()) or "none"))
     try:
-        writer, done = open_output(plan, dataset, config, url, cameras)
+        writer = open_output(plan, existing, dataset, config, url, cameras)
     except BaseException:
         client.close()
         raise
+    done = existing.done if existing is not None else set()
+    broken = existing.broken if existing is not None else {}
     result = EvalResult(writer.root, cameras=cameras)
     result.skipped = [s.tag for s in samples if s.tag in done]
     todo = [s for s in samples if s.tag not in done]
+    blocked = {s.tag: why for s in todo if (why := _blocked(writer.root / ROLLOUTS_DIR / s.tag, s.tag in broken))}
+    todo = [s for s in todo if s.tag not in blocked]
+    for s in todo:
+        if s.tag in broken:
+            log(f"redo {s.tag}: {shorten(broken[s.tag])}")
     size = None if config.image_resolution is None else (config.image_resolution[1], config.image_resolution[0])
     reader = FrameReader(size)
     requests = [(s.episode, f) for s in todo for f in s.frames]
@@ -244,23 +379,27 @@ def evaluate(plan: EvalPlan, log: Callable[[str], None] = lambda line: print(lin
     bar = progress_bar(sum(len(s.frames) for s in todo), "eval", unit="request", show=progress)
 
     def fail(tag: str, why: str) -> None:
-        result.failed[tag] = one_line(why)
+        result.failed[tag] = shorten(why)
         line = f"error: {tag}: {result.failed[tag]}"
         if bar is not None:
             bar.write(line, file=sys.stderr)
         else:
             log(line)
 
+    for tag, why in blocked.items():
+        fail(tag, why)
     try:
         for i, sample in enumerate(todo):
             started = time.perf_counter()
             try:
                 if client is None:
-                    client = PolicyClient(url, plan.timeout_s)
-                    if client.config != config:
-                        raise SampleError(f"the server's config changed on reconnecting: {client.config.raw}")
+                    client = PolicyClient(url, plan.timeout_s, plan.max_reply_bytes)
+                    if _json_safe(client.config.raw) != _json_safe(config.raw):  # arrays compared by value
+                        raise SampleError("the server's config changed on reconnecting: "
+                                          f"{json.dumps(_json_safe(client.config.raw))}")
                 waited = _one_sample(plan, dataset, sample, client, cameras, video_keys,
-                                     lambda k: prefetch.get(int(first_request[i]) + k), writer, result, url)
+                                     lambda k: prefetch.get(int(first_request[i]) + k), writer, result, url,
+                                     redo=sample.tag in broken)
                 result.client_s += [(time.perf_counter() - started - waited) / len(sample.frames)] * len(sample.frames)
             except ReplyError as exc:  # a bad chunk: the connection is still good
                 fail(sample.tag, str(exc))
@@ -285,12 +424,27 @@ def evaluate(plan: EvalPlan, log: Callable[[str], None] = lambda line: print(lin
     return result
 
 
+def _blocked(dest: Path, broken: bool) -> str | None:
+    """Why the rollout directory ``dest`` may not be written, if it may not: something there that
+    is no broken rollout (a file, a link, a directory without ``rollout.json``) is the user's."""
+    if not os.path.lexists(dest):
+        return None
+    if broken and not dest.is_symlink() and dest.is_dir() and (
+            (dest / ROLLOUT_FILE).is_file() or not any(dest.iterdir())):
+        return None
+    what = ("a symbolic link" if dest.is_symlink() else "a file" if not dest.is_dir()
+            else f"a directory without {ROLLOUT_FILE}")
+    return (f"{dest} is {what}, not a rollout: --resume replaces only a broken rollout; move it away to "
+            "ask for this sample again")
+
+
 def _one_sample(plan: EvalPlan, dataset: LeRobotDataset, sample: Sample, client: PolicyClient,
                 cameras: Mapping[str, str], video_keys: Mapping[str, str], observation: Callable[[int], Observation],
-                writer: SessionWriter, result: EvalResult, url: str) -> float:
+                writer: SessionWriter, result: EvalResult, url: str, redo: bool = False) -> float:
     """Request, check and write one rollout: a reset, then a chunk at each of its frames, all
     under one session id. ``observation(k)`` reads the k-th frame's. Returns the time spent
-    waiting on the server [s]."""
+    waiting on the server [s]. With ``redo``, the broken rollout of the same tag is replaced
+    (atomically: the old one goes only once the new one is in place)."""
     episode: Episode = dataset.episode(sample.episode)
     obs = observation(0)  # a frame past the episode's end fails here, before the server is asked
     session_id = str(uuid.uuid4())
@@ -299,6 +453,7 @@ def _one_sample(plan: EvalPlan, dataset: LeRobotDataset, sample: Sample, client:
     client.reset(session_id)
     waited = time.perf_counter() - t0
     chunks, latencies, states = [], [], []
+    video_bytes = 0
     for k, frame in enumerate(sample.frames):
         obs = obs if k == 0 else observation(k)
         t1 = time.perf_counter()
@@ -306,7 +461,12 @@ def _one_sample(plan: EvalPlan, dataset: LeRobotDataset, sample: Sample, client:
         latencies.append(time.perf_counter() - t1)
         waited += latencies[-1]
         chunks.append(chunk_from_reply(reply, video_keys))
+        del reply  # the reply's other arrays
         states.append(obs.state)
+        video_bytes += sum(v.nbytes for v in chunks[-1].videos.values())
+        if video_bytes > 2 * plan.max_reply_bytes:
+            raise ReplyError(f"reply: the predicted frames of this replay pass {2 * plan.max_reply_bytes / 1e6:g} MB "
+                             f"by the chunk at frame {frame} (twice --max-reply-mb)")
         if chunks[-1].actions.shape != chunks[0].actions.shape:
             raise ReplyError(f"reply: the chunk at frame {frame} has shape {chunks[-1].actions.shape}, "
                              f"the first had {chunks[0].actions.shape}")
@@ -329,9 +489,11 @@ def _one_sample(plan: EvalPlan, dataset: LeRobotDataset, sample: Sample, client:
         sample.tag, kind=sample.kind, actions=np.stack([c.actions for c in chunks]), prompt=prompt,
         episode_index=sample.episode, start_frame=sample.frames[0], fps=episode.fps,
         executed_per_chunk=executed, frames_per_chunk=frames_per_chunk, videos=videos or None,
-        gt_episode_length=episode.length, extra={"eval": record},
+        gt_episode_length=episode.length, extra={"eval": record}, overwrite=redo,
     )
     result.written.append(sample.tag)
+    if redo:
+        result.redone.append(sample.tag)
     result.latency_s += latencies
     return waited
 
@@ -348,6 +510,9 @@ def format_result(result: EvalResult) -> str:
     """The run's summary: counts, latency p50 / p95, the client's own time per request."""
     done = len(result.written)
     parts = [f"{done} rollout(s) written"]
+    if result.redone:
+        n = len(result.redone)
+        parts.append(f"{n} broken rollout{'s' if n > 1 else ''} redone ({', '.join(sorted(result.redone))})")
     if result.skipped:
         parts.append(f"{len(result.skipped)} already there (--resume)")
     if result.failed:
