@@ -398,3 +398,33 @@ def test_report_opens_offline_in_chromium(demo_page, tmp_path):
             browser.close()
     assert requests == [], f"the page tried the network: {requests}"
     assert problems == [], problems
+
+
+@pytest.mark.parametrize("umask", [0o022, 0o027])
+def test_written_outputs_get_the_umasks_mode(tmp_path, umask):
+    """The page, a metrics cache entry and a decimated mesh are written through a temporary file
+    renamed into place: they get the mode open() gives (0666 less the umask), not mkstemp's 0600,
+    so a page meant to be shared is readable as the umask allows."""
+    import os
+    import stat
+    from typing import Any
+
+    from inspector.cache import MetricsCache
+    from inspector.report.html import write_report_html
+    from inspector.robot.meshes import _write_stl_atomic
+
+    report = build_report([str(DEMO / "rollouts" / "single_f000")], jobs=1, use_cache=False)
+    old = os.umask(umask)
+    try:
+        page = write_report_html(report, tmp_path / "report.html")
+        cache = MetricsCache(tmp_path / "cache")
+        cache.put("k" * 64, {"x": 1}, Any)
+        entries = [p for p in (tmp_path / "cache").rglob("*") if p.is_file()]
+        mesh = tmp_path / "part.stl"
+        _write_stl_atomic(mesh, np.eye(3), np.array([[0, 1, 2]]))
+    finally:
+        os.umask(old)
+    assert len(entries) == 1
+    for path in (page, entries[0], mesh):
+        assert stat.S_IMODE(path.stat().st_mode) == 0o666 & ~umask, path
+

@@ -20,7 +20,6 @@ from __future__ import annotations
 import datetime
 import os
 import re
-import tempfile
 from collections.abc import Callable, Sequence
 from html import escape
 from importlib import resources
@@ -28,6 +27,7 @@ from pathlib import Path
 from typing import Any, cast
 from urllib.parse import quote
 
+from .._files import mkstemp_sibling
 from ..errors import InspectorError
 from ..units import JOINT_NAMES
 from .episode_figures import episode_figures, episode_key, episode_summary_numbers
@@ -389,7 +389,7 @@ def write_report_html(report: dict[str, Any], out: str | Path, sources: Sequence
     out.parent.mkdir(parents=True, exist_ok=True)
     page = render_report_html(report, sources=sources, rrd_links=find_rrd_links(report["rollouts"], out.parent))
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
+        fd, tmp = mkstemp_sibling(out)  # readable as the umask allows, as every other output
     except OSError as exc:
         raise InspectorError(out, f"cannot write the page ({exc.strerror or exc})") from None
     try:
