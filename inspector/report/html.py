@@ -132,7 +132,7 @@ def _table(rows: Sequence[Row], links: dict[int, str]) -> str:
             tag = f'<a href="{escape(links[i])}" title="Rerun recording">{tag}</a>'
         cells = [f"<td class=t>{tag}</td>"]
         for header, _, num, cell in cols:
-            cells.append(f"<td{_cell_class(header, num)}>{escape(cell(r))}</td>")
+            cells.append(_cell(header, num, cell(r)))
         out.append(f'<tr data-key="{i}">{"".join(cells)}</tr>')
     out.append("</tbody></table>")
     return "".join(out)
@@ -262,11 +262,14 @@ def _episode_columns() -> list[tuple[str, str, bool, Callable[[Row], str]]]:
     ]
 
 
-def _cell_class(header: str, numeric: bool) -> str:
-    """Numbers align right (the default), text left; the long text column wraps."""
+def _cell(header: str, numeric: bool, text: str) -> str:
+    """A table cell: numbers align right (the default), text left; the long text column (a prompt,
+    a task) takes the width the others leave, cut to one line, the whole of it in its tooltip."""
     if numeric:
-        return ""
-    return ' class="t prompt"' if header in ("prompt", "task") else " class=t"
+        return f"<td>{escape(text)}</td>"
+    if header in ("prompt", "task"):
+        return f'<td class="t prompt" title="{escape(text)}">{escape(text)}</td>'
+    return f"<td class=t>{escape(text)}</td>"
 
 
 def _episode_table(rows: Sequence[Row]) -> str:
@@ -274,7 +277,7 @@ def _episode_table(rows: Sequence[Row]) -> str:
     head = "".join(f'<th{" class=num" if num else ""} title="{escape(tip)}">{escape(h)}</th>' for h, tip, num, _ in cols)
     out = [f'<table id="episodes"><thead><tr>{head}</tr></thead><tbody>']
     for i, r in enumerate(rows):
-        cells = "".join(f"<td{_cell_class(h, num)}>{escape(cell(r))}</td>" for h, _, num, cell in cols)
+        cells = "".join(_cell(h, num, cell(r)) for h, _, num, cell in cols)
         out.append(f'<tr data-key="{episode_key(i)}">{cells}</tr>')
     out.append("</tbody></table>")
     return "".join(out)
