@@ -28,6 +28,7 @@ from typing import Any, cast
 from urllib.parse import quote
 
 from .._files import mkstemp_sibling
+from ..analysis.video_action import median_lag_label
 from ..errors import InspectorError
 from ..units import JOINT_NAMES
 from .episode_figures import episode_figures, episode_key, episode_summary_numbers
@@ -108,10 +109,9 @@ def _columns(rows: Sequence[Row], views: list[str]) -> list[tuple[str, str, bool
                      cast(Callable[[Row], str], lambda r, v=view: _f(r["video_psnr_db"].get(v), ".1f"))))
     for view in views:
         cols.append((f"lag {view}", f"median lag, video GT time - joints GT time, {view} camera [s] "
-                     "(+: the video runs ahead of the actions)", True,
+                     "(+: the video runs ahead of the actions; frozen: the video stands still, no lag)", True,
                      cast(Callable[[Row], str],
-                          lambda r, v=view: _f(((r.get("video_action") or {}).get(v) or {}).get("lag_s_median"),
-                                               "+.2f"))))
+                          lambda r, v=view: median_lag_label((r.get("video_action") or {}).get(v)))))
     cols += [
         ("worst", "the worst chunk (largest time-aligned drift, else limit excess)", True,
          lambda r: _f((r.get("worst_chunk") or {}).get("chunk"), "d")),
@@ -221,6 +221,14 @@ _DEFINITIONS = [
     ("best-match drift", "min_j d(pred(t), gt_j) over every GT frame (speed-invariant); its argmin gives the tempo."),
     ("DTW drift", "order-preserving alignment of predicted and GT paths."),
     ("lim.steps", "steps with any joint more than the margin past its URDF limit."),
+    ("lag", "median over the imagined frames of the video's GT time (the GT frame each frame resembles most) "
+            "minus the joints' GT time (their best match) [s]; + the video runs ahead of the actions. "
+            "\"no match\": no frame has a GT time on both sides (the video matches no GT frame, or the "
+            "joints are off the GT path)."),
+    ("frozen", "the imagined video stands still while the joints move: over the frames with a lag, its GT "
+               "time spans (10th to 90th percentile) less than a fifth of what the joints' GT time spans, "
+               "and theirs at least 1 s. Its lag is no lag (each frame's is only how far the joints are "
+               "from the one time the video shows), so none is given."),
     ("units", "the data's: arm joints in degrees, gripper 0..100."),
 ]
 
