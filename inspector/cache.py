@@ -28,11 +28,11 @@ import hashlib
 import json
 import os
 import sys
-import tempfile
 import threading
 from pathlib import Path
 from typing import Any
 
+from ._files import mkstemp_sibling
 from .errors import one_line
 from .schema import mismatch
 
@@ -139,7 +139,7 @@ class MetricsCache:
         path = self._path(key)
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(prefix=".", suffix=".tmp", dir=path.parent)
+            fd, tmp = mkstemp_sibling(path, prefix=".")
             try:
                 with os.fdopen(fd, "wb") as fh:
                     fh.write(encode_entry(key, record))

@@ -398,3 +398,69 @@ def test_report_opens_offline_in_chromium(demo_page, tmp_path):
             browser.close()
     assert requests == [], f"the page tried the network: {requests}"
     assert problems == [], problems
+
+
+@pytest.mark.parametrize("umask", [0o022, 0o027])
+def test_written_outputs_get_the_umasks_mode(tmp_path, umask):
+    """The page, a metrics cache entry and a decimated mesh are written through a temporary file
+    renamed into place: they get the mode open() gives (0666 less the umask), not mkstemp's 0600,
+    so a page meant to be shared is readable as the umask allows."""
+    import os
+    import stat
+    from typing import Any
+
+    from inspector.cache import MetricsCache
+    from inspector.report.html import write_report_html
+    from inspector.robot.meshes import _write_stl_atomic
+
+    report = build_report([str(DEMO / "rollouts" / "single_f000")], jobs=1, use_cache=False)
+    old = os.umask(umask)
+    try:
+        page = write_report_html(report, tmp_path / "report.html")
+        cache = MetricsCache(tmp_path / "cache")
+        cache.put("k" * 64, {"x": 1}, Any)
+        entries = [p for p in (tmp_path / "cache").rglob("*") if p.is_file()]
+        mesh = tmp_path / "part.stl"
+        _write_stl_atomic(mesh, np.eye(3), np.array([[0, 1, 2]]))
+    finally:
+        os.umask(old)
+    assert len(entries) == 1
+    for path in (page, entries[0], mesh):
+        assert stat.S_IMODE(path.stat().st_mode) == 0o666 & ~umask, path
+
+
+@pytest.mark.browser
+@pytest.mark.skipif(_reason is not None, reason=_reason or "")
+def test_the_rollout_table_fits_a_1400_px_window(demo_report, tmp_path):
+    """Every column, the prompt's included, within a 1400 px window: no horizontal scroll; a long
+    prompt is cut to one line, the whole of it in the cell's tooltip."""
+    from playwright.sync_api import sync_playwright
+
+    report = copy.deepcopy(demo_report)
+    long_prompt = "Pick the red cube, lift it over the blue bowl, then " * 6 + "place it in the bowl"
+    report["rollouts"][0]["prompt"] = long_prompt
+    out = tmp_path / "report.html"
+    out.write_text(render_report_html(report))
+    with sync_playwright() as p:
+        browser = launch(p)
+        try:
+            page = browser.new_page(viewport={"width": 1400, "height": 900})
+            page.goto(out.as_uri())
+            page.wait_for_selector("html[data-ready]", timeout=30_000)
+            page.locator("#rollouts").scroll_into_view_if_needed()
+            page.screenshot(path=str(tmp_path / "table.png"))
+            got = page.evaluate("""() => {
+                const table = document.querySelector('#rollouts'), wrap = table.parentElement;
+                const head = [...table.querySelectorAll('thead th')].find(th => th.textContent.trim() === 'prompt');
+                const cell = table.querySelector('tbody tr td.prompt');
+                return {right: head.getBoundingClientRect().right, width: head.getBoundingClientRect().width,
+                        view: document.documentElement.clientWidth, wrapRight: wrap.getBoundingClientRect().right,
+                        scroll: wrap.scrollWidth - wrap.clientWidth, cellTitle: cell.title,
+                        cellHeight: cell.getBoundingClientRect().height, cut: cell.scrollWidth > cell.clientWidth};
+            }""")
+        finally:
+            browser.close()
+    assert got["scroll"] <= 0, got  # no horizontal scroll
+    assert got["right"] <= got["wrapRight"] <= got["view"], got  # the prompt column's right edge in view
+    assert got["width"] >= 120, got  # and room to read it
+    assert got["cellTitle"] == long_prompt and got["cut"] and got["cellHeight"] < 30, got  # one line, whole in its tooltip

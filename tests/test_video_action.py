@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import contextlib
+import json
+import re
+import subprocess
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -266,8 +270,8 @@ def test_the_recording_holds_both_gt_times_the_lag_and_the_split(tmp_path: Path)
 
 
 @contextlib.contextmanager
-def _opened_in_app(session: Path) -> Iterator[tuple[Any, Any]]:
-    """(app, tab): ``session`` served, its rollout "r" open in a tab with its video metrics done."""
+def _opened_in_app(session: Path, tag: str = "r") -> Iterator[tuple[Any, Any]]:
+    """(app, tab): ``session`` served, its rollout ``tag`` open in a tab with its video metrics done."""
     from test_app import connect, key
 
     from inspector.app import serve
@@ -276,11 +280,21 @@ def _opened_in_app(session: Path) -> Iterator[tuple[Any, Any]]:
     try:
         client, tab = connect(app)
         with client:
-            assert tab.open(key(app, "r"))
+            assert tab.open(key(app, tag))
             assert tab.loaded.frames.done.wait(120)
             yield app, tab
     finally:
         app.stop()
+
+
+def _wait_for_agreements(tab: Any, views: tuple[str, ...]) -> None:
+    """Until the tab's plots have the agreement of ``views`` (they follow the frames' callback)."""
+    import time
+
+    deadline = time.monotonic() + 60
+    while not all(v in tab.plots.agreements for v in views):
+        assert time.monotonic() < deadline, "no agreement after the video metrics"
+        time.sleep(0.05)
 
 
 def test_the_app_plots_both_gt_times_marks_the_split_and_reads_the_lag(tmp_path: Path) -> None:
@@ -436,3 +450,150 @@ def test_gt_thumbnails_kept_from_an_earlier_window_match_as_a_fresh_read(monkeyp
     gt_clip = build_timeline(session.rollouts["single_f076"]).gt.clips["front"].path
     os.utime(gt_clip, ns=(0, 0))  # the GT video rewritten: what was kept is not its thumbnails
     assert metrics("single_f076").to_json() == fresh.to_json() and served[-1] is False
+
+
+# ----------------------------------------------------------------------------------------------
+# A frozen video: it stands still while the joints move, so its lag is no lag.
+
+
+@pytest.fixture(scope="module")
+def demo_frozen(tmp_path_factory) -> Path:
+    """A copy of the demo session with two more rollouts of prompt_train's joints: ``frozen``, its
+    imagined video frozen on its mid-episode frame (with the demo's noise and wobble of an imagined
+    frame over it), and ``paused``, its video held for 5 s mid-way."""
+    import shutil
+
+    from inspector.data.video import VideoClip, encode_h264
+    from inspector.demo.generate import DEMO_DIR, degrade
+
+    if not (DEMO_DIR / "session.json").is_file():
+        pytest.skip("sessions/demo not built (inspector demo --rebuild)")
+    root = tmp_path_factory.mktemp("frozen") / "demo"
+    shutil.copytree(DEMO_DIR, root)
+    rollouts, rng = root / "rollouts", np.random.default_rng(0)
+    for tag in ("frozen", "paused"):
+        shutil.copytree(rollouts / "prompt_train", rollouts / tag)
+        for clip in sorted((rollouts / tag / "video").glob("*.mp4")):
+            frames = np.stack([rgb for _, rgb in VideoClip(clip).iter_frames()])
+            mid = len(frames) // 2
+            if tag == "frozen":
+                frames = degrade(np.repeat(frames[mid][None], len(frames), axis=0), rng)
+            else:
+                frames[mid:mid + 150] = frames[mid]
+            encode_h264(clip, frames, 30.0)
+    return root
+
+
+def _report(paths: list[Path], *flags: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "inspector", "report", *map(str, paths), "--no-cache", "--jobs", "1", *flags],
+                          capture_output=True, text=True, timeout=600)
+
+
+def test_a_frozen_video_is_called_frozen_and_has_no_lag(demo_frozen: Path, tmp_path: Path) -> None:
+    out = _report([demo_frozen], "--json", "--html", str(tmp_path / "report.html"))
+    assert out.returncode == 0, out.stderr
+    rows = {r["tag"]: r for r in json.loads(out.stdout)["rollouts"]}
+    for view in ("front", "wrist"):
+        frozen = rows["frozen"]["video_action"][view]
+        assert frozen["matched_fraction"] > 0.9  # every frame matches the one it shows...
+        assert frozen["frozen"] is True  # ...but the video stands still while the joints move
+        assert frozen["lag_s_median"] is None and frozen["lag_s_abs_mean"] is None and frozen["split_chunk"] is None
+        assert frozen["note"].startswith("frozen:")
+        # a video that pauses for 5 s of 15 still follows its joints
+        paused = rows["paused"]["video_action"][view]
+        assert paused["frozen"] is False and abs(paused["lag_s_median"]) < 0.15
+        for tag, row in rows.items():
+            if tag != "frozen":  # no rollout of the demo is frozen (single chunks: too short to tell)
+                assert row["video_action"][view]["frozen"] is not True, (tag, view)
+    # the page's lag cells say so, not a number
+    page = (tmp_path / "report.html").read_text()
+    row = re.search(r'<tr data-key="\d+"><td class=t>frozen</td>((?:(?!</tr>).)*)</tr>', page, re.S)
+    assert row is not None and row.group(1).count(">frozen</td>") == 2, "the frozen rollout's lag cells"
+
+
+def test_the_text_report_and_the_overview_say_frozen_and_no_match(demo_frozen: Path) -> None:
+    from inspector.app._overview_rows import OverviewRow
+    from inspector.app._overview_table import Query, select_rows, table_html
+
+    out = _report([demo_frozen / "rollouts" / "frozen", demo_frozen / "rollouts" / "single_f384"])
+    assert out.returncode == 0, out.stderr
+    lines = {line.split()[0]: line for line in out.stdout.splitlines() if line.strip()}
+    assert lines["frozen"].count(" frozen") == 2  # the two lag columns
+    assert lines["single_f384"].count("no match") == 2  # no frame of either view matches
+
+    def row(tag: str, entry: dict[str, Any]) -> OverviewRow:
+        summary = {"tag": tag, "session": "s", "kind": "autoregressive", "prompt": "pick", "episode_index": 0,
+                   "start_frame": 0, "rmse_deg": None, "per_step_mse": None, "chunk_joints": None, "n_chunks": 3,
+                   "steps_per_chunk": 9, "episode_length": None, "time_aligned_drift": None, "best_match_drift": None,
+                   "tempo": None, "ee_error_mm": None, "post_episode_chunks": 0, "limit_violations": {"steps": 0},
+                   "video_psnr_db": {"front": 18.0}, "video_action": {"front": entry}}
+        return OverviewRow(f"s / {tag}", "s", tag, "autoregressive", "pick", Path("/nowhere"), summary, None)
+
+    frozen = {"lag_s_median": None, "lag_s_abs_mean": None, "matched_fraction": 1.0, "split_chunk": None,
+              "video_tempo": 0.0, "frozen": True, "note": "frozen: the video stands still"}
+    unmatched = {"lag_s_median": None, "lag_s_abs_mean": None, "matched_fraction": 0.0, "split_chunk": None,
+                 "video_tempo": None, "frozen": None, "note": "no match: no imagined frame resembles one GT frame"}
+    rows = [row("a", frozen), row("b", unmatched)]
+    html = table_html(rows, select_rows(rows, Query(), {}), {})
+    assert ">frozen<" in html and ">no match<" in html
+
+
+def test_the_recording_says_the_video_is_frozen_and_logs_no_lag(demo_frozen: Path, tmp_path: Path) -> None:
+    from test_export import Recording, rrd_verify
+
+    from inspector.export import layout as L
+    from inspector.export.recording import write_recording
+
+    tl = build_timeline(open_session(demo_frozen).rollouts["frozen"])
+    path = write_recording(tl, tmp_path / "frozen.rrd")
+    rrd_verify(path)
+    rec = Recording(path)
+    text = rec.static(L.DESCRIPTION, "TextDocument:text")[0][0]
+    assert "| median video-action lag, front (video - joints GT time) | frozen: " in text
+    for view in ("front", "wrist"):
+        assert len(rec.scalars(L.lag_path(view), order_by=L.FRAME)[0]) == 0  # no lag drawn
+        assert len(rec.scalars(L.gt_time_path(view, "video"), order_by=L.FRAME)[0]) > 400  # the still video's GT time
+    _, events = rec.temporal(L.EVENTS, "TextLog:text")
+    assert any(e[0].startswith("front: frozen: the video stands still") for e in events)
+
+
+def test_frames_without_a_lag_read_no_match_in_the_recording(tmp_path: Path) -> None:
+    """bias_elbow's joints leave the GT path (more than JOINT_MATCH_MAX from every GT pose): its
+    frames there have no lag; the recording marks them "no match" instead of leaving a gap."""
+    from test_export import Recording
+
+    from inspector.demo.generate import DEMO_DIR
+    from inspector.export import layout as L
+    from inspector.export.recording import write_recording
+
+    if not (DEMO_DIR / "session.json").is_file():
+        pytest.skip("sessions/demo not built (inspector demo --rebuild)")
+    tl = build_timeline(open_session(DEMO_DIR).rollouts["bias_elbow"])
+    va = tl.video_action("front")
+    assert va is not None and va.lag_s is not None
+    rec = Recording(write_recording(tl, tmp_path / "bias.rrd"))
+    frames, _ = rec.scalars(L.gt_time_path("front", "no_match"), order_by=L.FRAME)
+    np.testing.assert_array_equal(frames, np.flatnonzero(~np.isfinite(va.lag_s)))
+    assert len(frames) > 100
+    assert "front: no match (no lag)" in rec.static(L.gt_time_path("front", "no_match"), "SeriesPoints:names")[0]
+    assert "nan" not in rec.static(L.DESCRIPTION, "TextDocument:text")[0][0]
+
+
+def test_the_app_reads_frozen_and_no_match_never_nan(demo_frozen: Path) -> None:
+    from test_app import key
+
+    with _opened_in_app(demo_frozen, "bias_elbow") as (app, tab):
+        _wait_for_agreements(tab, ("front", "wrist"))
+        # chunk 21: the elbow's bias has taken the joints off the GT path
+        tab.set_step(21 * 9, force=True)
+        readout = tab.controls.readout.content
+        assert "nan" not in readout and "front: no match" in readout, readout
+        assert "front: no match at " in tab.plots.agreement_plot.handle.title
+        tab.open(key(app, "frozen"))
+        assert tab.loaded.frames.done.wait(120)
+        _wait_for_agreements(tab, ("front", "wrist"))
+        tab.set_step(40, force=True)
+        readout = tab.controls.readout.content
+        assert "front: video frozen" in readout and "wrist: video frozen" in readout, readout
+        assert not re.search(r"lag (front|wrist)", readout)
+        assert "front: video frozen, no lag" in tab.plots.agreement_plot.handle.title

@@ -15,6 +15,12 @@ Both are put on one ruler, the real (GT) episode:
 Without GT joints the video's GT time still gives the **video's tempo** (its speed against the
 real episode), as the joints' best match gives theirs.
 
+A **frozen** video (one that stands still while the joints move) has no lag: each of its frames
+matches the one GT frame it shows, so the lag is only the joints' own course mirrored, and its
+median can land near 0. It is told by how much of the episode each side covers
+(:meth:`VideoAction.spans`): the video's GT time spans less than :data:`FROZEN_SHARE` of what the
+joints' GT time spans, and the joints span at least :data:`FROZEN_MIN_SPAN_S`.
+
 Thumbnails are taken while the clips stream for PSNR (:mod:`inspector.analysis.video_metrics`), so
 the report's agreement costs no decoding of its own. The app shows a rollout's frames first and
 streams the clips once more for the match after, so a rollout can be scrubbed sooner. The match
@@ -51,6 +57,16 @@ JOINT_TIE = 0.25
 SPLIT_LAG_S = 0.5
 # ...for good when it stays so in this share of the chunks that follow.
 SPLIT_SHARE = 2 / 3
+# A video is frozen when its GT time covers less than this share of the GT time the joints cover over
+# the same frames (each from its 10th to its 90th percentile: a video that pauses for less than
+# four fifths of the rollout still spans its course, and one at a fifth of the joints' tempo or
+# more is slow, not frozen)...
+FROZEN_SHARE = 0.2
+# ...and the joints cover at least this much [s]: over a shorter course (a single chunk, a held
+# pose) a still video agrees with the joints.
+FROZEN_MIN_SPAN_S = 1.0
+# The percentiles a side's span runs between: a few frames matched far off do not widen it.
+SPAN_PERCENTILES = (10.0, 90.0)
 # A predicted pose farther than this [data units] from every GT pose has no GT time: the joints
 # are off the real path (a bias, a limit excursion), and the nearest pose would be a guess.
 JOINT_MATCH_MAX = 5.0
@@ -257,6 +273,7 @@ class ViewAgreementJson(TypedDict):
     matched_fraction: float
     split_chunk: int | None
     video_tempo: float | None
+    frozen: bool | None
     note: str | None
 
 
@@ -272,6 +289,8 @@ class VideoAction:
         confidence: (F,) the match's confidence (NaN: no GT frame).
         joints_gt_s: (F,) the joints' GT time at the frame's step [s], or None without GT joints.
         fps: steps per second.
+        video_match_s: (F,) the video's GT time of the match itself [s] (before a tied match is
+            paired with the joints' time nearest to it), or None: as ``video_gt_s``.
     """
 
     view: str
@@ -281,11 +300,40 @@ class VideoAction:
     confidence: Array
     joints_gt_s: Array | None
     fps: float
+    video_match_s: Array | None = None
 
     @property
     def lag_s(self) -> Array | None:
-        """(F,) video GT time - joints GT time [s]; NaN where the frame has no match."""
+        """(F,) video GT time - joints GT time [s]; NaN where the frame has no match (the video's,
+        or the joints' off the GT path)."""
         return None if self.joints_gt_s is None else self.video_gt_s - self.joints_gt_s
+
+    def spans(self) -> tuple[float, float] | None:
+        """(video, joints): how much of the episode [s] each side's GT time covers over the frames
+        whose lag is measured, from its 10th to its 90th percentile; None without two such frames.
+
+        The video's side is its match itself: a still frame that ties with two times of the
+        episode (the rest pose at its start and end) stays at one of them, where pairing it with
+        the joints would follow them from one to the other."""
+        lag = self.lag_s
+        if lag is None or self.joints_gt_s is None:
+            return None
+        both = np.isfinite(lag)
+        if both.sum() < 2:
+            return None
+        video = self.video_gt_s if self.video_match_s is None else self.video_match_s
+        return _span(video[both]), _span(self.joints_gt_s[both])
+
+    def frozen(self) -> bool | None:
+        """Whether the video stands still while the joints move: its GT time covers less than
+        :data:`FROZEN_SHARE` of the joints' and theirs at least :data:`FROZEN_MIN_SPAN_S` (None: no
+        lag measured, see :meth:`spans`). A frozen video's lag is no lag: each frame's is only the
+        joints' distance from the one time the video shows."""
+        spans = self.spans()
+        if spans is None:
+            return None
+        video, joints = spans
+        return bool(joints >= FROZEN_MIN_SPAN_S and video < FROZEN_SHARE * joints)
 
     @property
     def matched_fraction(self) -> float:
@@ -329,6 +377,7 @@ class VideoAction:
         """The view's ``video_action`` entry of a report row (a null says why in ``note``)."""
         lag = self.lag_s
         matched = lag[np.isfinite(lag)] if lag is not None else np.empty(0)
+        frozen = self.frozen()
         note = None
         if not np.isfinite(self.video_gt_s).any():
             note = "no match: no imagined frame resembles one GT frame more than the others"
@@ -336,14 +385,53 @@ class VideoAction:
             note = "no GT joints: lag not measured"
         elif not matched.size:
             note = f"no lag: the predicted joints are more than {JOINT_MATCH_MAX:g} from every GT pose where the video matched"
+        elif frozen:
+            note = frozen_note(self)
+            matched = np.empty(0)  # a frozen video's lag is no lag
         return {
             "lag_s_median": round(float(np.median(matched)), 4) if matched.size else None,
             "lag_s_abs_mean": round(float(np.abs(matched).mean()), 4) if matched.size else None,
             "matched_fraction": round(self.matched_fraction, 4),
-            "split_chunk": self.split_chunk(),
+            "split_chunk": None if frozen else self.split_chunk(),
             "video_tempo": _rounded(self.video_tempo()),
+            "frozen": frozen,
             "note": note,
         }
+
+
+# What a lag reads where there is none to read: a frame (or every frame of a view) without a match
+# on one side, and a frozen video.
+NO_MATCH = "no match"
+FROZEN = "frozen"
+
+
+def median_lag_label(entry: ViewAgreementJson | None, fmt: str = "+.2f", missing: str = "-") -> str:
+    """A view's median lag as a table cell: the number, or why there is none (:data:`FROZEN`,
+    :data:`NO_MATCH` where no frame has a match on both sides, ``missing`` otherwise: no GT
+    joints, not measured)."""
+    if entry is None:
+        return missing
+    if entry.get("frozen"):
+        return FROZEN
+    lag = entry.get("lag_s_median")
+    if lag is not None:
+        return format(lag, fmt)
+    note = entry.get("note") or ""
+    return NO_MATCH if note.startswith(("no match", "no lag")) else missing
+
+
+def frozen_note(va: VideoAction) -> str:
+    """Why ``va``'s video is frozen, in one line (the note of its report entry)."""
+    spans = va.spans()
+    assert spans is not None
+    return (f"frozen: the video stands still (its GT time spans {spans[0]:.2f} s) while the joints "
+            f"move (theirs {spans[1]:.2f} s): no lag")
+
+
+def _span(values: Array) -> float:
+    """How far ``values`` spread: their 10th to 90th percentile (:data:`SPAN_PERCENTILES`)."""
+    lo, hi = np.percentile(values, SPAN_PERCENTILES)
+    return float(hi - lo)
 
 
 def _rounded(value: float | None) -> float | None:
@@ -448,6 +536,7 @@ def agreement(view: str, match: FrameMatch, frame_step: npt.NDArray[np.int64], s
     steps_of = np.asarray(gt_step_of_index, np.float64)
     matched = np.flatnonzero(match.matched) if steps_of.size else np.empty(0, np.intp)
     video_step[matched] = np.interp(match.gt_index[matched], np.arange(steps_of.size), steps_of)
+    video_match = video_step.copy()  # the match itself, before a tie is paired with the joints
     if joints is not None and joints_step is not None:
         off_path = joints.best_drift[np.minimum(frame_step, len(joints.best_drift) - 1)] > JOINT_MATCH_MAX
         joints_step[off_path] = np.nan
@@ -459,7 +548,8 @@ def agreement(view: str, match: FrameMatch, frame_step: npt.NDArray[np.int64], s
         video_step[both[row]] = video_middle[at_video]
         joints_step[both[row]] = joints_middle[at_joints]
     return VideoAction(view, frame_step, frame_step // max(1, steps_per_chunk), video_step / fps,
-                       match.confidence, None if joints_step is None else joints_step / fps, fps)
+                       match.confidence, None if joints_step is None else joints_step / fps, fps,
+                       video_match / fps)
 
 
 def _video_runs(match: FrameMatch, frames: npt.NDArray[np.intp], steps_of: Array

@@ -17,6 +17,7 @@ from html import escape
 from importlib import resources
 from typing import Any, cast
 
+from ..analysis.video_action import median_lag_label
 from ..report.compare import compare_reports
 from ..report.figures import report_figures
 from ..report.html import KIND_LABELS, figure_html
@@ -297,9 +298,10 @@ def _columns(views: Sequence[str], notes: Mapping[str, Note], comparison: Compar
                           lambda r, v=v: "" if r.summary is None else _f(r.summary["video_psnr_db"].get(v), ".1f")))
              for v in views]
     cols += [_Column(f"lag {v}", f"median lag, video GT time − joints GT time, {v} camera [s] "
-                     "(+: the imagined video runs ahead of the predicted actions)",
-                     cast(Callable[[OverviewRow], str], lambda r, v=v: "" if r.summary is None else _f(
-                         ((r.summary.get("video_action") or {}).get(v) or {}).get("lag_s_median"), "+.2f")))
+                     "(+: the imagined video runs ahead of the predicted actions; frozen: the video stands "
+                     "still while the joints move, no lag; no match: no frame has a GT time on both sides)",
+                     cast(Callable[[OverviewRow], str], lambda r, v=v: "" if r.summary is None else median_lag_label(
+                         (r.summary.get("video_action") or {}).get(v), missing="–")))
              for v in views]
     cols += [
         _Column("⚑", "flagged in the Notes", lambda r: "⚑" if note_of(r).flag else "", False, "flag"),

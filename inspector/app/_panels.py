@@ -14,7 +14,7 @@ import numpy as np
 
 from ..analysis.metrics import prompt_divergence
 from ..analysis.timeline import RolloutTimeline
-from ..analysis.video_action import VideoAction
+from ..analysis.video_action import FROZEN, NO_MATCH, VideoAction
 from ..units import JOINT_NAMES
 from ._cards import unit
 from ._clip_clock import CLIP_CLOCK_HTML, CLIP_CLOCK_LABEL
@@ -121,6 +121,7 @@ class PlotPanel:
         self.agreement_plot: CursorPlot | None = None
         # each view's video-action agreement, once its video metrics are known
         self.agreements: dict[str, VideoAction] = {}
+        self._frozen: dict[str, bool | None] = {}  # VideoAction.frozen() of each of agreements, once asked
         self._match_errors: tuple[tuple[str, str], ...] = ()  # (view, why) of the failed frame matches shown
         self._tl: RolloutTimeline | None = None
         self._cmp: RolloutTimeline | None = None
@@ -133,7 +134,7 @@ class PlotPanel:
             p.handle.remove()
         self._handles, self.plots = [], []
         self.joint_plot = self.psnr_plot = self.agreement_plot = None
-        self.agreements, self._match_errors = {}, ()
+        self.agreements, self._match_errors, self._frozen = {}, (), {}
         self._tl = None
 
     def build(self, tl: RolloutTimeline, compare: RolloutTimeline | None,
@@ -196,9 +197,10 @@ class PlotPanel:
                 self.psnr_plot = self._add(CursorPlot(gui, "Video PSNR, imagined vs GT [dB]", *self._psnr_xy(psnr),
                                                       **common))
             if tl.video_views():
-                self.agreements = self._known_agreements()
+                self.agreements, self._frozen = self._known_agreements(), {}
                 x, lines, marks = self._agreement_xy()
-                self.agreement_plot = self._add(CursorPlot(gui, AGREEMENT_TITLE, x, lines, marks=marks, **common))
+                self.agreement_plot = self._add(CursorPlot(gui, self._agreement_title(), x, lines, marks=marks,
+                                                           **common))
                 self.update_psnr(psnr, match_errors)  # a frame match that failed before: the title says so
 
     def _add(self, plot: CursorPlot) -> CursorPlot:
@@ -296,8 +298,24 @@ class PlotPanel:
             lines.append(Line("joints' GT time", _padded(first.joints_gt_s, n), PRED_HEX, 1.2, (4, 3)))
         return x, lines, marks
 
+    def _agreement_title(self) -> str:
+        """The agreement plot's title, with what its lines cannot show: a view whose frame match
+        failed, a frozen video (no lag), and frames with no match."""
+        notes = [f"{view}: no frame match ({why})" for view, why in self._match_errors]
+        for view, va in self.agreements.items():
+            if self._frozen.setdefault(view, va.frozen()):
+                notes.append(f"{view}: video {FROZEN}, no lag")
+                continue
+            lag = va.lag_s if va.lag_s is not None else va.video_gt_s
+            missing = int((~np.isfinite(lag)).sum())
+            if missing:
+                notes.append(f"{view}: {NO_MATCH} at {missing} of {lag.size} frames")
+        return " · ".join([AGREEMENT_TITLE, *notes])
+
     def lag_text(self, step: int) -> str:
-        """The lag of each view at ``step`` for the readout ("" before any is known)."""
+        """The lag of each view at ``step`` for the readout ("" before any is known): "no match"
+        where the frame has no lag (its video matched no GT frame, or the joints are off the GT
+        path), "video frozen" for a frozen video."""
         tl = self._tl
         if tl is None or not self.agreements:
             return ""
@@ -308,9 +326,13 @@ class PlotPanel:
                 continue
             lag = va.lag_s
             if not np.isfinite(va.video_gt_s[f]):
-                parts.append(f"{view}: no match")
+                parts.append(f"{view}: {NO_MATCH}")
             elif lag is None:
                 parts.append(f"{view} video at GT {va.video_gt_s[f]:.2f} s")
+            elif self._frozen.setdefault(view, va.frozen()):
+                parts.append(f"{view}: video {FROZEN}")
+            elif not np.isfinite(lag[f]):
+                parts.append(f"{view}: {NO_MATCH}")
             else:
                 parts.append(f"lag {view} {lag[f]:+.2f} s")
         return " · ".join(parts)
@@ -322,10 +344,9 @@ class PlotPanel:
             known = self._known_views()
             failed = tuple(sorted((match_errors or {}).items()))
             if known != tuple(self.agreements) or failed != self._match_errors:
-                self.agreements, self._match_errors = self._known_agreements(), failed
+                self.agreements, self._match_errors, self._frozen = self._known_agreements(), failed, {}
                 x, lines, marks = self._agreement_xy()
-                title = " · ".join([AGREEMENT_TITLE, *(f"{view}: no frame match ({why})" for view, why in failed)])
-                self.agreement_plot.set_lines(lines, x=x, marks=marks, title=title)
+                self.agreement_plot.set_lines(lines, x=x, marks=marks, title=self._agreement_title())
         if self.psnr_plot is None or self._tl is None:
             return
         if tuple(v for v, p in psnr.items() if p is not None) == self._psnr_views:

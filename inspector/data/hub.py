@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import os
 import shutil
-import tempfile
 from pathlib import Path
 
+from .._files import mkdtemp_sibling
 from ..errors import InspectorError
 
 _TRUE = ("1", "true", "yes", "on")
@@ -51,7 +51,7 @@ def fetch_dataset(repo_id: str, dest: Path) -> Path:
 
     endpoint = os.environ.get("HF_ENDPOINT", "https://huggingface.co")
     dest.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".partial", dir=dest.parent))
+    staging = mkdtemp_sibling(dest)  # mkdtemp's 0700 would stick to the dataset once renamed
     try:
         snapshot_download(repo_id, repo_type="dataset", local_dir=staging)
         if not (staging / "meta" / "info.json").is_file():

@@ -33,7 +33,6 @@ import math
 import os
 import re
 import shutil
-import tempfile
 import threading
 import uuid
 from collections.abc import Callable, Mapping
@@ -44,6 +43,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
+from .._files import mkdtemp_sibling, mkstemp_sibling, short_name
 from ..errors import InspectorError, require
 from ..units import JOINT_NAMES, Units, parse_units
 from .video import VideoClip, encode_h264, probe
@@ -577,9 +577,8 @@ def _type_names(kind: type | tuple[type, ...]) -> str:
 def write_json_atomic(path: Path, data: Any) -> None:
     """Write JSON so that the file is either the old one or the complete new one."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{_short(path.name)}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = mkstemp_sibling(path)  # as open() would create it, not mkstemp's 0600
     try:
-        os.fchmod(fd, 0o666 & ~process_umask())  # as open() would create it, not mkstemp's 0600
         with os.fdopen(fd, "w") as fh:
             json.dump(data, fh, indent=2, allow_nan=False)
             fh.write("\n")
@@ -591,30 +590,10 @@ def write_json_atomic(path: Path, data: Any) -> None:
         raise
 
 
-def process_umask() -> int:
-    """The process's umask, read without changing it (setting it, even briefly, races other threads)."""
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("Umask:"):
-                return int(line.split()[1], 8)
-    except (OSError, ValueError, IndexError):
-        pass
-    mask = os.umask(0o022)  # no /proc (not Linux): the classic read-back
-    os.umask(mask)
-    return mask
-
-
 def make_staging_dir(dest: Path) -> Path:
     """A fresh hidden sibling of ``dest`` to build it in (``.<name>.<random>.partial``), with the
     mode ``mkdir`` would give (``mkdtemp``'s 0700 would stick to the directory once renamed)."""
-    staged = Path(tempfile.mkdtemp(prefix=f".{_short(dest.name)}.", suffix=".partial", dir=dest.parent))
-    os.chmod(staged, 0o777 & ~process_umask())
-    return staged
-
-
-def _short(name: str) -> str:
-    """A name short enough to prefix a temporary name (NAME_MAX is 255 bytes)."""
-    return name.encode("utf-8", "surrogateescape")[:64].decode("utf-8", "ignore")
+    return mkdtemp_sibling(dest)
 
 
 def check_replaceable(dest: Path, overwrite: bool, kind: str, marker: str) -> bool:
@@ -654,7 +633,7 @@ def _replace_dir(staged: Path, dest: Path, overwrite: bool, kind: str, marker: s
             write took the place meanwhile. ``staged`` is left for the caller to remove.
     """
     if check_replaceable(dest, overwrite, kind, marker):
-        trash = dest.with_name(f".{_short(dest.name)}.old-{uuid.uuid4().hex[:8]}")
+        trash = dest.with_name(f".{short_name(dest.name)}.old-{uuid.uuid4().hex[:8]}")
         os.replace(dest, trash)
         try:
             os.replace(staged, dest)

@@ -9,14 +9,17 @@ import numpy as np
 
 from ..analysis import metrics
 from ..analysis.timeline import RolloutTimeline
+from ..analysis.video_action import VideoAction, median_lag_label
 from ..units import JOINT_NAMES
 
 
-def describe(tl: RolloutTimeline, psnr_db: Mapping[str, float | None]) -> str:
+def describe(tl: RolloutTimeline, psnr_db: Mapping[str, float | None],
+             agreements: Mapping[str, VideoAction] | None = None) -> str:
     """Markdown for ``/description``.
 
     Args:
         psnr_db: mean PSNR [dB] per view (None where the view has no GT frame).
+        agreements: video-action agreement per view that has one.
     """
     if tl.kind == "episode":
         return describe_episode(tl)
@@ -46,6 +49,7 @@ def describe(tl: RolloutTimeline, psnr_db: Mapping[str, float | None]) -> str:
         *_joint_rows(tl, unit),
         *_limit_rows(tl),
         *[f"| mean video PSNR, {v} | {_fmt(p, ' dB')} |" for v, p in psnr_db.items()],
+        *[_agreement_row(va) for va in (agreements or {}).values()],
         *_reference_rows(r.extra),
         *_fact_rows(r.extra),
         "",
@@ -140,6 +144,17 @@ def _joint_rows(tl: RolloutTimeline, unit: str) -> list[str]:
         rows.append(f"| time-aligned drift after the episode, mean ({int((~inside).sum())} steps) | "
                     f"{_fmt(_mean(ta[~inside]), ' ' + unit)} |")
     return rows
+
+
+def _agreement_row(va: VideoAction) -> str:
+    """The median video-action lag of a view, or why it has none (a frozen video, no match)."""
+    entry = va.summary()
+    if entry["lag_s_median"] is None:  # frozen, no match, no GT joints: the note says which
+        value = entry["note"] or median_lag_label(entry, missing="not measured")
+    else:
+        value = f"{median_lag_label(entry)} s ({100 * entry['matched_fraction']:.0f}% of frames matched"
+        value += f", parting from chunk {entry['split_chunk']})" if entry["split_chunk"] is not None else ")"
+    return f"| median video-action lag, {va.view} (video - joints GT time) | {value} |"
 
 
 def _limit_rows(tl: RolloutTimeline) -> list[str]:

@@ -15,7 +15,7 @@ Entity tree::
     /plots/joint_error/<joint>        prediction - GT per joint
     /plots/joints/<joint>/...         predicted, GT, limits, limit-violation markers
     /plots/ee_error_mm, /plots/psnr/<view>, /plots/chunk_rmse
-    /plots/gt_time/<view>/{video,joints,split}, /plots/lag/<view>   video-action agreement
+    /plots/gt_time/<view>/{video,joints,split,no_match}, /plots/lag/<view>   video-action agreement
     /plots/markers/episode_end
     /events                           TextLog at chunk boundaries and the episode's end
 
@@ -85,6 +85,7 @@ PRED_RGBA = (60, 130, 255, 255)
 PRED_MESH_RGBA = {"printed": (0.25, 0.55, 1.0, 0.45), "servo": (0.08, 0.2, 0.5, 0.45)}
 PRED_MESH_DEFAULT = (0.25, 0.55, 1.0, 0.45)
 LIMIT_RGBA = (230, 40, 40, 255)
+NO_MATCH_RGBA = (150, 150, 150, 255)  # a frame without a video-action lag
 JOINT_RGBA = {
     "shoulder_pan": (31, 119, 180, 255),
     "shoulder_lift": (255, 127, 14, 255),
@@ -119,7 +120,7 @@ def psnr_path(view: str) -> str:
 
 def gt_time_path(view: str, series: str) -> str:
     """``series``: ``video`` (the video's GT time), ``joints`` (the joints'), ``split`` (the chunk
-    from which they part)."""
+    from which they part), ``no_match`` (frames without a lag)."""
     return f"{PLOTS}/gt_time/{view}/{series}"
 
 

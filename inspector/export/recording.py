@@ -158,7 +158,8 @@ def _log_recording(rec: rr.RecordingStream, tl: RolloutTimeline, views: list[str
 
     report(_VIDEO_METRICS[1], "arms")
     mean_psnr = {v: (float(np.nanmean(s)) if np.isfinite(s).any() else None) for v, s in psnr.items()}
-    rec.log(L.DESCRIPTION, rr.TextDocument(describe(tl, mean_psnr), media_type="text/markdown"),
+    agreements = {v: va for v in psnr if (va := tl.video_action(v)) is not None}
+    rec.log(L.DESCRIPTION, rr.TextDocument(describe(tl, mean_psnr, agreements), media_type="text/markdown"),
             static=True)
     log_arms(rec, tl, steps_indexes(np.arange(tl.n_steps)))
     report(0.80, "metric series")
@@ -166,9 +167,8 @@ def _log_recording(rec: rr.RecordingStream, tl: RolloutTimeline, views: list[str
     log_markers(rec, tl, steps_indexes)
     for i, (view, series) in enumerate(psnr.items()):
         log_psnr(rec, tl, view, series, frames_indexes, L.VIEW_RGBA[i % len(L.VIEW_RGBA)])
-        agreement = tl.video_action(view)
-        if agreement is not None:
-            log_video_action(rec, agreement, frames_indexes, L.VIEW_RGBA[i % len(L.VIEW_RGBA)])
+        if view in agreements:
+            log_video_action(rec, agreements[view], frames_indexes, L.VIEW_RGBA[i % len(L.VIEW_RGBA)])
     lo, hi = _VIDEO_ASSETS
     with tempfile.TemporaryDirectory(prefix="inspector-video-") as tmp:
         for i, view in enumerate(views):

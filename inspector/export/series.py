@@ -14,7 +14,7 @@ import numpy.typing as npt
 import rerun as rr
 
 from ..analysis.timeline import RolloutTimeline
-from ..analysis.video_action import VideoAction
+from ..analysis.video_action import FROZEN, NO_MATCH, VideoAction, frozen_note
 from ..units import JOINT_NAMES
 from . import layout as L
 
@@ -103,6 +103,17 @@ def log_video_action(rec: rr.RecordingStream, va: VideoAction, frame_indexes_for
         return n
     log_series(rec, L.gt_time_path(va.view, "joints"), frames, va.joints_gt_s, frame_indexes_for,
                "joints' GT time [s]", L.PRED_RGBA)
+    # a frame without a lag, drawn where the side that has a GT time has it (0 where neither has)
+    missing = np.flatnonzero(~np.isfinite(lag))
+    at = np.where(np.isfinite(va.joints_gt_s), va.joints_gt_s, np.where(np.isfinite(va.video_gt_s), va.video_gt_s, 0.0))
+    log_series(rec, L.gt_time_path(va.view, "no_match"), missing, at[missing], frame_indexes_for,
+               f"{va.view}: {NO_MATCH} (no lag)", L.NO_MATCH_RGBA, points=True, marker="cross", marker_size=3.0)
+    if va.frozen():  # no lag to plot: the GT times show the still video beside the moving joints
+        log_series(rec, L.lag_path(va.view), [], [], frame_indexes_for,
+                   f"{va.view} lag: video {FROZEN}, no lag", rgba, points=True, marker_size=2.5)
+        rec.send_columns(L.EVENTS, frame_indexes_for(np.array([0])), rr.TextLog.columns(
+            text=[f"{va.view}: {frozen_note(va)}"], level=["WARN"]))
+        return n
     log_series(rec, L.lag_path(va.view), frames, lag, frame_indexes_for,
                f"{va.view} lag, video - joints [s]", rgba, points=True, marker_size=2.5)
     split = va.split_chunk()

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from ..analysis.video_action import median_lag_label
 from ..cache import warn_once
 from ..data.episodes import episode_tag
 from ..data.lerobot_dataset import dataset_name
@@ -189,7 +190,7 @@ def format_report(report: dict[str, Any]) -> str:
     def psnr_cells(r: dict[str, Any]) -> str:
         lag = r.get("video_action") or {}
         return ("".join(f" {_f(r['video_psnr_db'].get(v), '.1f'):>11}" for v in views)
-                + "".join(f" {_f((lag.get(v) or {}).get('lag_s_median'), '+.2f'):>11}" for v in views))
+                + "".join(f" {median_lag_label(lag.get(v)):>11}" for v in views))
 
     if single:
         lines += ["Single-chunk predictions (each chunk's horizon vs logged GT)",
@@ -229,7 +230,8 @@ def format_report(report: dict[str, Any]) -> str:
     margin = rows[0]["limit_violations"]["margin_deg"]
     lines.append(f"lim.steps: steps with any joint more than {margin:g} deg past its URDF limit; "
                  f"PSNR [dB]: imagined vs GT frames of that camera; lag s: median of the video's GT time "
-                 f"minus the joints' (+: the video runs ahead of the actions)")
+                 f"minus the joints' (+: the video runs ahead of the actions; frozen: the video stands still "
+                 f"while the joints move, no lag; no match: no frame has a GT time on both sides)")
     agg = report["aggregate"]
     psnr = ", ".join(f"{v} {m:.2f}" for v, m in agg["mean_video_psnr_db"].items()) or "-"
     lines.append(f"Aggregate over {agg['n']} rollouts: RMSE mean {_f(agg['mean_rmse_deg'], '.3f')}, "

@@ -132,18 +132,21 @@ def video_action_lags(rows: Sequence[Row]) -> dict[str, Any] | None:
     """Median lag (video GT time - joints GT time) of every rollout and view that has one.
 
     Returns:
-        None when no rollout has a lag, else ``views`` and, per view, ``keys`` (row indexes) and
-        ``lag`` (s).
+        None when no rollout has a lag, else ``views``, ``frozen`` (the rollouts and views whose
+        video is frozen: no lag) and, per view, ``keys`` (row indexes) and ``lag`` (s).
     """
     by_view: dict[str, tuple[list[int], list[float]]] = defaultdict(lambda: ([], []))
+    frozen = []
     for i, r in enumerate(rows):
         for view, entry in sorted((r.get("video_action") or {}).items()):
+            if entry is not None and entry.get("frozen"):
+                frozen.append(f"{r['tag']} {view}")
             if entry is not None and entry.get("lag_s_median") is not None:
                 by_view[view][0].append(i)
                 by_view[view][1].append(entry["lag_s_median"])
     if not by_view:
         return None
-    return {"views": sorted(by_view),
+    return {"views": sorted(by_view), "frozen": frozen,
             **{view: {"keys": keys, "lag": np.array(lags, dtype=np.float64)} for view, (keys, lags) in by_view.items()}}
 
 
@@ -171,6 +174,8 @@ def _draw_video_action_lags(fig: Figure, rows: Sequence[Row], data: dict[str, An
                   label=view)
     fig.panels.append(Panel(ax.svg()))
     fig.legend = ax.legend
+    if data["frozen"]:
+        fig.note = f"frozen video (no lag), left out: {', '.join(data['frozen'])}"
 
 
 # ----------------------------------------------------------------------------------------------

@@ -20,7 +20,6 @@ from __future__ import annotations
 import datetime
 import os
 import re
-import tempfile
 from collections.abc import Callable, Sequence
 from html import escape
 from importlib import resources
@@ -28,6 +27,8 @@ from pathlib import Path
 from typing import Any, cast
 from urllib.parse import quote
 
+from .._files import mkstemp_sibling
+from ..analysis.video_action import median_lag_label
 from ..errors import InspectorError
 from ..units import JOINT_NAMES
 from .episode_figures import episode_figures, episode_key, episode_summary_numbers
@@ -108,10 +109,9 @@ def _columns(rows: Sequence[Row], views: list[str]) -> list[tuple[str, str, bool
                      cast(Callable[[Row], str], lambda r, v=view: _f(r["video_psnr_db"].get(v), ".1f"))))
     for view in views:
         cols.append((f"lag {view}", f"median lag, video GT time - joints GT time, {view} camera [s] "
-                     "(+: the video runs ahead of the actions)", True,
+                     "(+: the video runs ahead of the actions; frozen: the video stands still, no lag)", True,
                      cast(Callable[[Row], str],
-                          lambda r, v=view: _f(((r.get("video_action") or {}).get(v) or {}).get("lag_s_median"),
-                                               "+.2f"))))
+                          lambda r, v=view: median_lag_label((r.get("video_action") or {}).get(v)))))
     cols += [
         ("worst", "the worst chunk (largest time-aligned drift, else limit excess)", True,
          lambda r: _f((r.get("worst_chunk") or {}).get("chunk"), "d")),
@@ -132,7 +132,7 @@ def _table(rows: Sequence[Row], links: dict[int, str]) -> str:
             tag = f'<a href="{escape(links[i])}" title="Rerun recording">{tag}</a>'
         cells = [f"<td class=t>{tag}</td>"]
         for header, _, num, cell in cols:
-            cells.append(f"<td{_cell_class(header, num)}>{escape(cell(r))}</td>")
+            cells.append(_cell(header, num, cell(r)))
         out.append(f'<tr data-key="{i}">{"".join(cells)}</tr>')
     out.append("</tbody></table>")
     return "".join(out)
@@ -221,6 +221,14 @@ _DEFINITIONS = [
     ("best-match drift", "min_j d(pred(t), gt_j) over every GT frame (speed-invariant); its argmin gives the tempo."),
     ("DTW drift", "order-preserving alignment of predicted and GT paths."),
     ("lim.steps", "steps with any joint more than the margin past its URDF limit."),
+    ("lag", "median over the imagined frames of the video's GT time (the GT frame each frame resembles most) "
+            "minus the joints' GT time (their best match) [s]; + the video runs ahead of the actions. "
+            "\"no match\": no frame has a GT time on both sides (the video matches no GT frame, or the "
+            "joints are off the GT path)."),
+    ("frozen", "the imagined video stands still while the joints move: over the frames with a lag, its GT "
+               "time spans (10th to 90th percentile) less than a fifth of what the joints' GT time spans, "
+               "and theirs at least 1 s. Its lag is no lag (each frame's is only how far the joints are "
+               "from the one time the video shows), so none is given."),
     ("units", "the data's: arm joints in degrees, gripper 0..100."),
 ]
 
@@ -262,11 +270,14 @@ def _episode_columns() -> list[tuple[str, str, bool, Callable[[Row], str]]]:
     ]
 
 
-def _cell_class(header: str, numeric: bool) -> str:
-    """Numbers align right (the default), text left; the long text column wraps."""
+def _cell(header: str, numeric: bool, text: str) -> str:
+    """A table cell: numbers align right (the default), text left; the long text column (a prompt,
+    a task) takes the width the others leave, cut to one line, the whole of it in its tooltip."""
     if numeric:
-        return ""
-    return ' class="t prompt"' if header in ("prompt", "task") else " class=t"
+        return f"<td>{escape(text)}</td>"
+    if header in ("prompt", "task"):
+        return f'<td class="t prompt" title="{escape(text)}">{escape(text)}</td>'
+    return f"<td class=t>{escape(text)}</td>"
 
 
 def _episode_table(rows: Sequence[Row]) -> str:
@@ -274,7 +285,7 @@ def _episode_table(rows: Sequence[Row]) -> str:
     head = "".join(f'<th{" class=num" if num else ""} title="{escape(tip)}">{escape(h)}</th>' for h, tip, num, _ in cols)
     out = [f'<table id="episodes"><thead><tr>{head}</tr></thead><tbody>']
     for i, r in enumerate(rows):
-        cells = "".join(f"<td{_cell_class(h, num)}>{escape(cell(r))}</td>" for h, _, num, cell in cols)
+        cells = "".join(_cell(h, num, cell(r)) for h, _, num, cell in cols)
         out.append(f'<tr data-key="{episode_key(i)}">{cells}</tr>')
     out.append("</tbody></table>")
     return "".join(out)
@@ -389,7 +400,7 @@ def write_report_html(report: dict[str, Any], out: str | Path, sources: Sequence
     out.parent.mkdir(parents=True, exist_ok=True)
     page = render_report_html(report, sources=sources, rrd_links=find_rrd_links(report["rollouts"], out.parent))
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
+        fd, tmp = mkstemp_sibling(out)  # readable as the umask allows, as every other output
     except OSError as exc:
         raise InspectorError(out, f"cannot write the page ({exc.strerror or exc})") from None
     try:

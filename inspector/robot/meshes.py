@@ -28,6 +28,7 @@ from typing import Any, cast
 import numpy as np
 import numpy.typing as npt
 
+from .._files import mkstemp_sibling
 from ..cache import default_dir, note_unusable
 
 CELL_M = 5e-4  # clustering grid [m]
@@ -186,7 +187,7 @@ def _write_stl_atomic(dest: Path, vertices: npt.NDArray[np.float64], faces: npt.
     triangles["normal"] = np.divide(normals, lengths, out=np.zeros_like(normals), where=lengths > 0)
     triangles["vertices"] = corners
     data = b"inspector decimated mesh".ljust(80, b" ") + len(faces).to_bytes(4, "little") + triangles.tobytes()
-    fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent)
+    fd, tmp = mkstemp_sibling(dest)
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
