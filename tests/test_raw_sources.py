@@ -157,7 +157,7 @@ def test_an_import_beside_its_source_still_works(tmp_path):
 def test_an_offline_run_whose_episode_is_missing_is_shown_without_gt(tmp_path):
     ds = write_dataset(tmp_path / "ds")
     write_run(tmp_path / "runs" / "lost", 2, sidecar={"dataset": "../../ds", "episode": 7})
-    out = cli("report", "--json", "--no-cache", tmp_path / "runs" / "lost")
+    out = cli("report", "-j", "1", "--json", "--no-cache", tmp_path / "runs" / "lost")
     assert out.returncode == 0, out.stderr
     report = json.loads(out.stdout)
     (row,) = report["rollouts"]
@@ -166,13 +166,13 @@ def test_an_offline_run_whose_episode_is_missing_is_shown_without_gt(tmp_path):
         assert row[metric] is None, metric
     assert report["warnings"] == ["lost: dataset ds has no episode 7 (episodes 0..1)"]
     assert "errors" not in report
-    text = cli("report", "--no-cache", tmp_path / "runs")
+    text = cli("report", "-j", "1", "--no-cache", tmp_path / "runs")
     assert text.returncode == 0 and "warning: lost: dataset ds has no episode 7" in text.stdout, text.stderr
 
     # with a run that has its episode, through --dataset: that one is measured, this one warned
     write_run(tmp_path / "runs" / "found", 1, seed=1, sidecar={"episode": 1})
     (tmp_path / "runs" / "lost" / "inspector_gt.json").write_text('{"episode": 7}')
-    out = cli("report", "--json", "--no-cache", tmp_path / "runs", "--dataset", ds)
+    out = cli("report", "-j", "1", "--json", "--no-cache", tmp_path / "runs", "--dataset", ds)
     assert out.returncode == 0, out.stderr
     report = json.loads(out.stdout)
     rows = {r["tag"]: r for r in report["rollouts"]}
@@ -209,7 +209,7 @@ def test_a_dreamzero_rollout_whose_episode_is_missing_is_shown_without_gt(tmp_pa
     ds = write_dataset(tmp_path / "ds")
     write_dreamzero(tmp_path / "dz" / "ep005", episode=5)
     write_dreamzero(tmp_path / "dz" / "ep001", episode=1)
-    out = cli("report", "--json", "--no-cache", tmp_path / "dz", "--dataset", ds)
+    out = cli("report", "-j", "1", "--json", "--no-cache", tmp_path / "dz", "--dataset", ds)
     assert out.returncode == 0, out.stderr
     report = json.loads(out.stdout)
     rows = {r["tag"]: r for r in report["rollouts"]}
@@ -263,23 +263,23 @@ def _edit(path: Path) -> None:
 def test_reports_of_an_unchanged_raw_output_read_the_cache(fmt, tmp_path):
     extra, edited, video = RAW[fmt](tmp_path)
     cache = tmp_path / "cache"
-    first = cli("report", "--json", tmp_path / "src", *extra, cache=cache)
+    first = cli("report", "-j", "1", "--json", tmp_path / "src", *extra, cache=cache)
     assert first.returncode == 0, first.stderr
     n = len(json.loads(first.stdout)["rollouts"])
     assert n >= 2 and entries(cache) == n
     for _ in range(2):
-        again = cli("report", "--json", tmp_path / "src", *extra, cache=cache)
+        again = cli("report", "-j", "1", "--json", tmp_path / "src", *extra, cache=cache)
         assert again.returncode == 0 and again.stdout == first.stdout, again.stderr
         assert entries(cache) == n
-    uncached = cli("report", "--json", "--no-cache", tmp_path / "src", *extra)
+    uncached = cli("report", "-j", "1", "--json", "--no-cache", tmp_path / "src", *extra)
     assert uncached.stdout == first.stdout
 
     _edit(edited)
-    assert cli("report", "--json", tmp_path / "src", *extra, cache=cache).returncode == 0
+    assert cli("report", "-j", "1", "--json", tmp_path / "src", *extra, cache=cache).returncode == 0
     grown = entries(cache)
     assert grown > n  # the edited rollout (every rollout, where it is a file they share)
     os.utime(video, ns=(video.stat().st_atime_ns, video.stat().st_mtime_ns + 10**9))  # touched
-    assert cli("report", "--json", tmp_path / "src", *extra, cache=cache).returncode == 0
+    assert cli("report", "-j", "1", "--json", tmp_path / "src", *extra, cache=cache).returncode == 0
     assert entries(cache) > grown
     if fmt != "lerobot-eval":  # a rollout of its own directory: the others still hit
         assert entries(cache) == grown + 1 and grown == n + 1
@@ -289,7 +289,7 @@ def test_reports_of_a_groot_dreams_dump_write_no_entries(tmp_path):
     """Its episodes are read as a dataset's (no video metrics to keep): the cache stays empty."""
     write_groot_dreams(tmp_path / "dump", [("pick the cube", 12), ("place it", 10)])
     cache = tmp_path / "cache"
-    outputs = [cli("report", "--json", tmp_path / "dump", cache=cache) for _ in range(3)]
+    outputs = [cli("report", "-j", "1", "--json", tmp_path / "dump", cache=cache) for _ in range(3)]
     assert all(o.returncode == 0 for o in outputs), outputs[0].stderr
     assert outputs[0].stdout == outputs[1].stdout == outputs[2].stdout
     assert entries(cache) == 0
