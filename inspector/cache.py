@@ -149,7 +149,10 @@ def record_import_sources(session, source: str | Path, dataset: str | Path | Non
                  "dataset": None if dataset is None else str(dataset), "files": files}
         states[tag] = hashlib.sha256(json.dumps(state, sort_keys=True).encode()).hexdigest()
     data = json.dumps({"schema": SCHEMA, "rollouts": states}).encode()
-    (Path(session.root) / IMPORTED_FROM).write_bytes(data)
+    try:
+        (Path(session.root) / IMPORTED_FROM).write_bytes(data)
+    except OSError:  # the cache is optional: without the record (or with a cut one, not JSON), its
+        pass  # entries are keyed as any session's
 
 
 def _imported_from(rollout) -> str | None:
