@@ -8,6 +8,14 @@ and of its GT (path, size, modification time), the joint-limit margin, and the c
 them (the package version and the metric modules' source), so a changed input or a new release
 never reads a stale entry.
 
+Another tool's output (an offline-inference run, a DreamZero-SO101 or lerobot-eval output) is
+imported into a temporary session each time a command reads it, whose files are new every time:
+its rollouts are keyed by the source files instead (path, size, modification time of every file
+of the rollout's source directory, else of the whole source; :func:`record_import_sources`), with
+the importers' code, the content of what the import derived from them (``session.json``,
+``rollout.json``, the arrays; the videos by name), and the GT as above. So a second report of an
+unchanged output reads its rows from the cache, and an edited or touched source file is a miss.
+
 An entry is written atomically and read back only when it is whole and is what was written: a
 header line names its key and the SHA-256 of the record that follows, and the record must match
 the type its writer declares (a ``TypedDict``, checked by :func:`inspector.schema.mismatch`).
@@ -41,6 +49,13 @@ ENV_DIR = "INSPECTOR_CACHE_DIR"
 DEFAULT_FRAME_CACHE_MB = 256
 SCHEMA = "inspector.metrics-cache/2"
 # The modules whose code decides the cached numbers.
+# What a file written next to ``session.json`` of a session imported in memory is called: the
+# state of each of its rollouts' source files (see :func:`record_import_sources`).
+IMPORTED_FROM = ".inspector-imported-from.json"
+# The modules whose code decides what an import derives from its source.
+_IMPORT_MODULES = ("data/importers/__init__.py", "data/importers/calibration.py",
+                   "data/importers/dreamzero_offline.py", "data/importers/dreamzero_so101.py",
+                   "data/importers/groot_dreams.py", "data/importers/lerobot_eval.py", "data/session.py")
 _METRIC_MODULES = ("analysis/metrics.py", "analysis/sweep.py", "analysis/video_metrics.py", "analysis/timeline.py",
                    "analysis/video_action.py",
                    "robot/kinematics.py", "units.py", "data/ground_truth.py", "report/rows.py", "data/video.py")
@@ -54,9 +69,10 @@ def default_dir() -> Path:
     return Path(base) / "inspector"
 
 
-@functools.lru_cache(maxsize=1)
-def code_fingerprint() -> str:
-    """Package version + the metric modules' source, hashed: entries of other code never match."""
+@functools.lru_cache(maxsize=2)
+def code_fingerprint(modules: tuple[str, ...] = _METRIC_MODULES) -> str:
+    """Package version + the source of ``modules`` (the metric modules), hashed: entries of other
+    code never match."""
     from importlib import metadata
 
     h = hashlib.sha256(SCHEMA.encode())
@@ -65,7 +81,7 @@ def code_fingerprint() -> str:
     except metadata.PackageNotFoundError:
         pass
     here = Path(__file__).resolve().parent
-    for name in _METRIC_MODULES:
+    for name in modules:
         try:
             h.update((here / name).read_bytes())
         except OSError:
@@ -91,17 +107,89 @@ def rollout_key(rollout, gt, limit_margin_deg: float) -> str:
     """
     root = Path(rollout.root).resolve()
     files = sorted(p for p in root.rglob("*") if p.is_file())
+    imported = _imported_from(rollout)
+    clips = {v: list(c.key) for v, c in sorted(gt.clips.items())}
+    if imported is None:
+        identity: dict[str, Any] = {"rollout": str(root), "files": [_file_state(p) for p in files]}
+    else:  # a temporary import: its own paths and times are new each time, its source's are not
+        session_json = Path(rollout.session.root) / "session.json"
+        identity = {"imported_from": imported, "tag": rollout.tag, "session": _content(session_json),
+                    "files": [_derived_state(p, root) for p in files]}
+        clips = {v: [_relative(Path(k[0]).resolve(), root), *k[1:]] for v, k in clips.items()}
     state = {
         "code": code_fingerprint(),
-        "rollout": str(root),
+        **identity,
         "units": rollout.units.to_json(),
-        "files": [_file_state(p) for p in files],
         "gt": {"source": gt.source, "dataset_key": list(gt.dataset_key) if gt.dataset_key else None,
                "files": [_file_state(Path(p)) for p in gt.files],
-               "clips": {v: list(c.key) for v, c in sorted(gt.clips.items())}},
+               "clips": clips},
         "limit_margin_deg": float(limit_margin_deg),
     }
     return hashlib.sha256(json.dumps(state, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def record_import_sources(session, source: str | Path, dataset: str | Path | None = None) -> None:
+    """Write into ``session`` (:class:`inspector.data.session.Session`), just imported in memory
+    from ``source``, what keys its rollouts' cache entries (:func:`rollout_key`): per rollout, the
+    state (path, size, modification time) of every file of its source directory
+    (``extra.source.path``, when that is a directory under ``source``), else of every file under
+    ``source``; with ``source``, ``dataset`` and the importers' code."""
+    source = Path(source).resolve()
+    whole: list[list[Any]] | None = None
+    states = {}
+    for tag, rollout in sorted(session.rollouts.items()):
+        own = rollout.extra.get("source") if isinstance(rollout.extra, dict) else None
+        where = Path(own["path"]).resolve() if isinstance(own, dict) and isinstance(own.get("path"), str) else None
+        if where is not None and where.is_dir() and where.is_relative_to(source):
+            files = _tree_state(where)
+        else:
+            whole = _tree_state(source) if whole is None else whole
+            files = whole
+        state = {"code": code_fingerprint(_IMPORT_MODULES), "source": str(source),
+                 "dataset": None if dataset is None else str(dataset), "files": files}
+        states[tag] = hashlib.sha256(json.dumps(state, sort_keys=True).encode()).hexdigest()
+    data = json.dumps({"schema": SCHEMA, "rollouts": states}).encode()
+    try:
+        (Path(session.root) / IMPORTED_FROM).write_bytes(data)
+    except OSError:  # the cache is optional: without the record (or with a cut one, not JSON), its
+        pass  # entries are keyed as any session's
+
+
+def _imported_from(rollout) -> str | None:
+    """The source state :func:`record_import_sources` wrote for ``rollout``, or None (a session
+    of its own, or no such record)."""
+    session = getattr(rollout, "session", None)
+    if session is None:
+        return None
+    try:
+        data = json.loads((Path(session.root) / IMPORTED_FROM).read_bytes())
+    except (OSError, ValueError):
+        return None
+    states = data.get("rollouts") if isinstance(data, dict) and data.get("schema") == SCHEMA else None
+    state = states.get(rollout.tag) if isinstance(states, dict) else None
+    return state if isinstance(state, str) else None
+
+
+def _tree_state(root: Path) -> list[list[Any]]:
+    """(path, size, modification time) of every file under ``root``, by path."""
+    return [_file_state(p) for p in sorted(p for p in root.rglob("*") if p.is_file())]
+
+
+def _content(path: Path) -> str | None:
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError:
+        return None
+
+
+def _derived_state(path: Path, root: Path) -> list[Any]:
+    """A file a temporary import wrote: its path in the rollout, and its content's hash (a video's
+    is left out: it is cut from the source files the key holds)."""
+    return [_relative(path, root), None if path.suffix == ".mp4" else _content(path)]
+
+
+def _relative(path: Path, root: Path) -> str:
+    return path.relative_to(root).as_posix() if path.is_relative_to(root) else str(path)
 
 
 class MetricsCache:

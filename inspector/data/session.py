@@ -625,6 +625,59 @@ def check_replaceable(dest: Path, overwrite: bool, kind: str, marker: str) -> bo
     return True
 
 
+def check_apart(dest: str | Path, source: str | Path, what: str = "the source") -> None:
+    """Refuse to write a session at ``dest`` that overlaps what it is made from: ``dest`` is
+    ``source``, holds it, or lies inside it, read through symbolic links (and bind mounts: each
+    directory is compared by its device and inode too). Replacing such a session
+    (``--overwrite``) would delete its own input; writing one inside its input changes it.
+    Nothing is written or read but the two paths' metadata.
+
+    Args:
+        what: how the error names ``source`` (``the source``, ``the GT dataset``).
+
+    Raises:
+        InspectorError: naming ``dest``, and ``source`` in its text.
+    """
+    dest, source = Path(os.path.expanduser(dest)), Path(os.path.expanduser(source))
+    relation = _overlap(dest, source)
+    if relation is None:
+        return
+    why = {"same": f"is {what} {source} itself, which the session would replace",
+           "holds": f"holds {what} {source}, which replacing the session would delete",
+           "inside": f"lies inside {what} {source}, which the session would be written into"}[relation]
+    links = [f"{p} resolves to {os.path.realpath(p)}" for p in (dest, source)
+             if os.path.realpath(p) != os.path.abspath(p)]
+    raise InspectorError(dest, why + (f" ({'; '.join(links)})" if links else "") + "; write the session elsewhere")
+
+
+def _overlap(a: Path, b: Path) -> str | None:
+    """How ``a`` stands to ``b``: ``same``, ``holds`` (b lies under a), ``inside`` (a lies under
+    b), or None. Paths are resolved; existing directories also compare by (device, inode)."""
+    ra, rb = a.resolve(), b.resolve()
+    if ra == rb:
+        return "same"
+    if rb.is_relative_to(ra):
+        return "holds"
+    if ra.is_relative_to(rb):
+        return "inside"
+
+    def identity(p: Path) -> tuple[int, int] | None:
+        try:
+            st = p.stat()
+        except OSError:
+            return None
+        return st.st_dev, st.st_ino
+
+    ia, ib = identity(ra), identity(rb)
+    if ia is not None and ia == ib:
+        return "same"
+    if ia is not None and any(identity(p) == ia for p in rb.parents):
+        return "holds"
+    if ib is not None and any(identity(p) == ib for p in ra.parents):
+        return "inside"
+    return None
+
+
 def _replace_dir(staged: Path, dest: Path, overwrite: bool, kind: str, marker: str) -> None:
     """Move a complete staged directory to ``dest``; an old ``dest`` goes only once the new is in.
 

@@ -17,6 +17,7 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..cache import record_import_sources
 from ..errors import InspectorError
 from .importers import dreamzero_offline, lerobot_eval
 from .importers.dreamzero_so101 import find_sources, load_in_memory
@@ -133,6 +134,7 @@ def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine
         session_path, handle, errors = _import_raw(path, dataset)
         out._temps.append(handle)
         session = opened(session_path)
+        record_import_sources(session, path, dataset)  # its cache entries are keyed by the source's files
         session.errors.update(errors)
         out.roots.append(Path(handle.name))
     if dataset is not None and session.dataset_root is None:

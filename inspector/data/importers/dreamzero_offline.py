@@ -39,9 +39,9 @@ import numpy.typing as npt
 from ...errors import InspectorError, require
 from ...units import JOINT_NAMES, Units, joint_order
 from ..lerobot_dataset import LeRobotDataset, find_dataset
-from ..session import SessionWriter, check_values, read_json_object
+from ..session import SessionWriter, check_apart, check_values, read_json_object
 from ..video import VideoClip, encode_h264, probe
-from .dreamzero_so101 import MOSAIC_VIEWS, tag_from_name
+from .dreamzero_so101 import MOSAIC_VIEWS, check_episode_flag, missing_episode, tag_from_name
 
 FORMAT = "dreamzero-offline"
 LAYOUT_NAME = "DreamZero-SO101 offline-inference runs"
@@ -376,6 +376,9 @@ def rollout_args(run: OfflineRun, videos: dict[str, Path], ds: LeRobotDataset | 
     )
     if ds is not None and run.gt.episode is None:
         run.warnings.append(f"no GT episode for the dataset: pass --episode N, or write it in {SIDECAR}")
+    elif ds is not None and run.gt.episode is not None and run.gt.episode not in ds.episode_indexes():
+        # shown without GT joints; reading the session says why (GroundTruth.warning), as for any session
+        run.warnings.append(missing_episode(ds, run.gt.episode))
     elif ds is not None and run.gt.episode is not None:
         where = run.path / SIDECAR
         ep = ds.episode(run.gt.episode)
@@ -431,8 +434,12 @@ def import_offline(
     runs = find_runs(src)
     if not runs:
         raise InspectorError(src, f"no {LAYOUT_NAME[:-1]} found (expected {ACTIONS_CSV})")
+    check_apart(dest, src)
     ds_name = _session_dataset(runs, dataset)
     ds = LeRobotDataset(find_dataset(ds_name)) if ds_name is not None else None
+    if ds is not None:
+        check_apart(dest, ds.root, "the GT dataset")
+    check_episode_flag(ds, episode)
     if ds is not None and ds.units.arm != UNITS.arm:
         raise InspectorError(ds.root, f"arm units {ds.units.label()}: offline-inference actions are in degrees; "
                                       "its GT would not compare")
@@ -463,7 +470,7 @@ def import_offline(
                 continue
             log(f"{tag}: {run.kind}, {run.n_chunks} chunk(s) x {run.actions.shape[1]} steps, "
                 f"{run.n_frames} frames, {'GT joints' if 'gt_actions' in args else 'no GT joints'}, "
-                f"prompt {run.prompt!r}")
+                f"prompt {run.prompt!r}" + "".join(f"; warning: {w}" for w in run.warnings))
     return Path(dest), errors
 
 

@@ -40,8 +40,8 @@ import numpy as np
 
 from ...errors import InspectorError, require
 from ...units import JOINT_NAMES, Units
-from ..lerobot_dataset import LeRobotDataset, find_dataset
-from ..session import SessionWriter, check_values, load_array, read_json_object
+from ..lerobot_dataset import LeRobotDataset, dataset_name, find_dataset
+from ..session import SessionWriter, check_apart, check_values, load_array, read_json_object
 from ..video import decode
 
 MOSAIC_VIEWS = (("front", 0, 0), ("top", 0, 1), ("gripper", 1, 0))  # (view, row, col) of the 2x2
@@ -114,10 +114,13 @@ def import_dreamzero(
     """
     sources = find_sources(src)
     src = Path(src)
+    check_apart(dest, src)
     ds = None
     if dataset is not None:
 
         ds = LeRobotDataset(find_dataset(dataset))
+        check_apart(dest, ds.root, "the GT dataset")
+        check_episode_flag(ds, episode)
     units = ds.units if ds is not None else Units("degrees")
     with SessionWriter.create(dest, name=Path(dest).name, units=units,
                               model={"name": "DreamZero-SO101"},
@@ -127,10 +130,11 @@ def import_dreamzero(
         for source in sources:
             tag = _unique_tag(source.path, src, used)
             args = _autoregressive(source.path) if source.kind == "autoregressive" else _single_chunk(source.path)
-            if ds is not None:
-                _attach_dataset_gt(args, ds, episode, source.path)
+            warning = _attach_dataset_gt(args, ds, episode, source.path) if ds is not None else None
+            if warning is not None:
+                args["extra"].setdefault("warnings", []).append(warning)
             writer.add_rollout(tag, **args)
-            log(_summary(tag, args))
+            log(_summary(tag, args) + (f"; warning: {warning}" if warning else ""))
     return Path(dest)
 
 
@@ -252,11 +256,14 @@ def _split_views(path: Path, prefix: str, mosaic_name: str) -> dict[str, Any]:
     return out
 
 
-def _attach_dataset_gt(args: dict[str, Any], ds: Any, episode: int | None, path: Path) -> None:
-    """Take GT joints (and length) from the dataset episode the rollout started in."""
+def _attach_dataset_gt(args: dict[str, Any], ds: Any, episode: int | None, path: Path) -> str | None:
+    """Take GT joints (and length) from the dataset episode the rollout started in; an episode
+    the dataset lacks leaves the rollout as it is (its own GT, if any) and is returned as a warning."""
     index = episode if episode is not None else args["episode_index"]
     if index is None:
         raise InspectorError(path / "meta.json", "episode: not given; pass --episode N with --dataset")
+    if index not in ds.episode_indexes():  # (--episode was checked up front)
+        return missing_episode(ds, index)
     ep = ds.episode(index)
     start = args["start_frame"]
     require(start < ep.length, path / "meta.json",
@@ -264,6 +271,20 @@ def _attach_dataset_gt(args: dict[str, Any], ds: Any, episode: int | None, path:
     args["episode_index"] = index
     args["gt_actions"] = ep.action[start:]
     args["gt_episode_length"] = ep.length
+    return None
+
+
+def missing_episode(ds: LeRobotDataset, index: int) -> str:
+    """Why a rollout naming episode ``index`` of ``ds`` has no GT joints from it."""
+    return f"dataset {dataset_name(ds)} has no episode {index} (episodes {ds.describe_episodes()}): no GT from it"
+
+
+def check_episode_flag(ds: LeRobotDataset | None, episode: int | None) -> None:
+    """Refuse ``--episode N`` that ``ds`` lacks (an episode named by a rollout's own files is a
+    warning instead: that rollout is shown without GT from the dataset)."""
+    if ds is not None and episode is not None and episode not in ds.episode_indexes():
+        raise InspectorError(ds.root, f"episode {episode} is out of range; available: {ds.describe_episodes()} "
+                                      "(--episode)")
 
 
 def _extra(meta: dict[str, Any], path: Path, **more: Any) -> dict[str, Any]:

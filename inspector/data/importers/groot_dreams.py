@@ -54,7 +54,7 @@ from ..lerobot_dataset import (
     VideoSegment,
     read_jsonl,
 )
-from ..session import ABSURD_VALUE, ArrayValue, Rollout, Session, SessionWriter, read_json_object
+from ..session import ABSURD_VALUE, ArrayValue, Rollout, Session, SessionWriter, check_apart, read_json_object
 from ..video import VideoClip, probe
 from .calibration import WRONG_CALIBRATION_SHARE, Calibration, parse_calibration
 
@@ -581,6 +581,7 @@ def import_groot_dreams(src: str | Path, dest: str | Path, *, calibration: str |
     if not src.exists():
         raise InspectorError(src, "not found")
     require(is_groot_dreams(src), src, f"not a {LAYOUT_TITLE} directory ({LAYOUT_HINT})")
+    check_apart(dest, src)
     ds = NeuralTrajectories(src, calibration)
     require(bool(ds.episodes), src / EPISODES_PATH, "no episodes")
     with SessionWriter.create(dest, name=Path(dest).name, units=ds.session.units, model={"name": MODEL_NAME},

@@ -38,7 +38,7 @@ import numpy.typing as npt
 from ...errors import InspectorError, require
 from ...units import Units
 from ..lerobot_dataset import INFO_PATH, LeRobotDataset
-from ..session import SessionWriter
+from ..session import SessionWriter, check_apart
 from ..video import VideoClip, encode_h264
 from .dreamzero_so101 import tag_from_name
 
@@ -288,6 +288,7 @@ def import_eval(src: str | Path, dest: str | Path, *, overwrite: bool = False, k
     src = Path(src)
     if not is_eval_output(src):
         raise InspectorError(src, f"no {EVAL_INFO}: not a lerobot-eval output directory")
+    check_apart(dest, src)
     episodes, errors = read_eval(src)
     if errors and not keep_going:
         raise next(iter(errors.values()))
