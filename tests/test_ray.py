@@ -131,6 +131,13 @@ def test_report_json_on_a_running_head_is_the_local_report(tmp_path):
         while "Ray runtime started" not in log.read_text():
             assert head.poll() is None and time.monotonic() < deadline, log.read_text()[-2000:]
             time.sleep(0.5)
+        start = time.monotonic()  # no token sent: one line, at once, not Ray's minute of retries
+        refused = inspector("report", session, "--ray", f"127.0.0.1:{port}", cache_dir=tmp_path / "cache-ray",
+                            env={"RAY_AUTH_MODE": "disabled"})
+        assert time.monotonic() - start < 30
+        assert refused.returncode == 2 and refused.stderr == (
+            f"error: 127.0.0.1:{port}: the cluster requires token authentication: set RAY_AUTH_MODE=token, with "
+            "the cluster's token in RAY_AUTH_TOKEN, RAY_AUTH_TOKEN_PATH or ~/.ray/auth_token\n")
         local = inspector("report", session, "--json", "--jobs", "1", cache_dir=tmp_path / "cache-local")
         assert local.returncode == 0, local.stderr
         on_ray = inspector("report", session, "--json", "--ray", f"127.0.0.1:{port}", cache_dir=tmp_path / "cache-ray",

@@ -46,6 +46,8 @@ PROBE_TIMEOUT_S = 5.0
 # The niceness of this run's Ray workers, and the variable through which Ray takes it from a job.
 WORKER_NICENESS = 0
 NICENESS_ENV = "RAY_worker_niceness"
+# How a driver tells Ray (>= 2.52) to send its token.
+AUTH_MODE_ENV = "RAY_AUTH_MODE"
 _ADDRESS = re.compile(r"(?:ray://)?(?P<host>\[[^\]]+\]|[^\s:/\[\]]+):(?P<port>\d{1,5})")
 
 J = TypeVar("J")
@@ -190,9 +192,15 @@ def check_address(address: str) -> None:
     if not speaks_grpc:  # e.g. the dashboard's port: Ray would retry for many minutes
         raise InspectorError(address, "answers, but not as Ray's GCS or Ray Client (both speak gRPC; by "
                                       "default the GCS listens on port 6379, Ray Client on 10001)")
-    if not _serves_ray(endpoint, client_first=address.startswith("ray://")):  # another gRPC service
+    serves = _serves_ray(endpoint, client_first=address.startswith("ray://"))
+    if serves is None:  # another gRPC service
         raise InspectorError(address, "a gRPC service, but not Ray's GCS or Ray Client (it knows neither's "
                                       "methods; by default the GCS listens on port 6379, Ray Client on 10001)")
+    # Given an address, Ray sends no token unless told to, and retries for a minute before it fails.
+    if serves == "token" and address != "auto" and os.environ.get(AUTH_MODE_ENV, "").lower() != "token":
+        raise InspectorError(address, f"the cluster requires token authentication: set {AUTH_MODE_ENV}=token, "
+                                      "with the cluster's token in RAY_AUTH_TOKEN, RAY_AUTH_TOKEN_PATH or "
+                                      "~/.ray/auth_token")
 
 
 def _answers_http2(conn: socket.socket) -> bool:
@@ -216,13 +224,14 @@ _GCS_METHOD = "/ray.rpc.NodeInfoGcsService/GetClusterId"
 _CLIENT_METHOD = "/ray.rpc.RayletDriver/ClusterInfo"
 
 
-def _serves_ray(endpoint: tuple[str, int], client_first: bool) -> bool:
-    """False when the gRPC server at ``endpoint`` has neither Ray service (another gRPC server);
-    True otherwise, whatever else goes wrong (Ray itself then says what)."""
+def _serves_ray(endpoint: tuple[str, int], client_first: bool) -> str | None:
+    """None when the gRPC server at ``endpoint`` has neither Ray service (another gRPC server);
+    ``token`` when Ray asked for an authentication token; ``ray`` otherwise, whatever else goes
+    wrong (Ray itself then says what)."""
     try:
         import grpc  # Ray's own dependency
     except ImportError:
-        return True
+        return "ray"
     host, port = endpoint
     methods = (_CLIENT_METHOD, _GCS_METHOD) if client_first else (_GCS_METHOD, _CLIENT_METHOD)
     with grpc.insecure_channel(f"[{host}]:{port}" if ":" in host else f"{host}:{port}") as channel:
@@ -232,8 +241,10 @@ def _serves_ray(endpoint: tuple[str, int], client_first: bool) -> bool:
             except grpc.RpcError as exc:
                 if exc.code() == grpc.StatusCode.UNIMPLEMENTED:
                     continue
-            return True
-    return False
+                if exc.code() == grpc.StatusCode.UNAUTHENTICATED:
+                    return "token"
+            return "ray"
+    return None
 
 
 def _auto_endpoint() -> tuple[str, int] | None:
