@@ -74,15 +74,17 @@ class Measured:
     stdout: str
 
 
-def run_process(args: Sequence[str], env: dict[str, str] | None = None, timeout: float = 1800) -> Measured:
-    """Run a command to its end: wall time and the peak summed RSS of its process tree."""
+def run_process(args: Sequence[str], env: dict[str, str] | None = None, timeout: float = 1800,
+                also: int | None = None) -> Measured:
+    """Run a command to its end: wall time and the peak summed RSS of its process tree, plus the
+    processes started meanwhile under the process ``also`` (a Ray head: the workers of the run)."""
     # Output goes to files: a pipe nobody reads while the command runs would block a command that
     # writes more than the pipe holds (a report's JSON), and it would never end.
     with tempfile.TemporaryFile("w+") as out_file, tempfile.TemporaryFile("w+") as err_file:
         start = time.perf_counter()
         proc = subprocess.Popen(list(args), stdout=out_file, stderr=err_file, text=True,
                                 env={**os.environ, **(env or {})})
-        peak = _sample_peak_rss(proc, lambda: proc.poll() is not None, timeout)
+        peak = _sample_peak_rss(proc, lambda: proc.poll() is not None, timeout, also)
         wall = time.perf_counter() - start
         out_file.seek(0)
         err_file.seek(0)
@@ -92,8 +94,10 @@ def run_process(args: Sequence[str], env: dict[str, str] | None = None, timeout:
     return Measured(wall, peak / 2**20, out)
 
 
-def _sample_peak_rss(proc: subprocess.Popen, done: Callable[[], bool], timeout: float) -> int:
-    """Peak summed RSS of ``proc`` and its descendants, sampled every 20 ms until ``done()``.
+def _sample_peak_rss(proc: subprocess.Popen, done: Callable[[], bool], timeout: float,
+                     also: int | None = None) -> int:
+    """Peak summed RSS of ``proc`` and its descendants (and of the descendants of process ``also``
+    that were not there at the start), sampled every 20 ms until ``done()``.
 
     Finding the descendants scans every process of the machine (~2 ms of CPU), so the tree is
     looked up every 0.25 s and only its members' RSS read in between: the sampler stays well
@@ -103,6 +107,8 @@ def _sample_peak_rss(proc: subprocess.Popen, done: Callable[[], bool], timeout: 
 
     root = psutil.Process(proc.pid)
     tree: list[psutil.Process] = [root]
+    other = psutil.Process(also) if also is not None else None
+    there = {p.pid for p in other.children(recursive=True)} if other is not None else set()
     peak = 0
     deadline = time.monotonic() + timeout
     next_lookup = 0.0
@@ -114,6 +120,9 @@ def _sample_peak_rss(proc: subprocess.Popen, done: Callable[[], bool], timeout: 
         if now >= next_lookup:
             with contextlib.suppress(psutil.Error):
                 tree = [root, *root.children(recursive=True)]
+            if other is not None:
+                with contextlib.suppress(psutil.Error):
+                    tree += [p for p in other.children(recursive=True) if p.pid not in there]
             next_lookup = now + 0.25
         total = 0
         for p in tree:
@@ -300,40 +309,139 @@ def _eval_session(tmp: Path, name: str, n: int, video: bool) -> Path:
 
 
 # ----------------------------------------------------------------------------------------------
-# inspector report --ray (whole process, Ray's startup included)
+# inspector report --ray (whole process)
 
 
 def bench_ray(tmp: Path, quick: bool) -> list[Figure]:
-    """``report --ray`` on a local Ray instance of 1 and 2 CPUs against ``--jobs 1`` and ``--jobs 2``
-    on the same 200 rollouts with two views, each run with a fresh metrics cache, then both paths
-    again on a warm cache (what is left is Ray's fixed cost: starting and stopping the instance)."""
+    """``report --ray`` against ``--jobs`` on the same rollouts with two views, each run a whole
+    process with a fresh metrics cache.
+
+    As a cluster user runs it: a Ray head of 1 and then 2 CPUs is started (``ray start --head``)
+    before the timing and stopped after it, and ``report --ray ADDRESS`` alternates with
+    ``report --jobs N`` (ABBA..., medians); its peak RSS counts the workers the head started for
+    it. Then ``--ray`` with no address once (a local instance, started and stopped by the
+    command), and both paths on a warm cache (what is left is each path's fixed cost)."""
     import importlib.util
 
     if importlib.util.find_spec("ray") is None:
         print("  ray: skipped (pip install -e '.[ray]')", file=sys.stderr)
         return []
     n = 60 if quick else 200
+    reps = 2 if quick else 3
     video = _eval_session(tmp, "video", n, video=True)
     quiet = {"RAY_USAGE_STATS_ENABLED": "0"}
     figures, outputs = [], []
-    warm = fresh_cache(tmp)  # filled by the cold --jobs 2 run, read by the warm pair
+    warm = fresh_cache(tmp)  # filled by the first --jobs 2 run, read by the warm runs
     for cpus in (2, 1):
-        local = run_process(inspector_cmd("report", video, "--json", "--jobs", cpus),
-                            env=warm if cpus == 2 else fresh_cache(tmp))
-        on_ray = run_process(inspector_cmd("report", video, "--json", "--ray", "--jobs", cpus),
-                             env={**fresh_cache(tmp), **quiet})
-        outputs += [local.stdout, on_ray.stdout]
-        figures.append(Figure(f"ray_{cpus}cpu_{n}_video", on_ray.wall_s, "s", "Ray <= 1.25x --jobs",
-                              on_ray.wall_s <= 1.25 * local.wall_s, on_ray.peak_mib, local.wall_s, local.peak_mib,
-                              f"local Ray instance of {cpus} CPU(s) vs --jobs {cpus}, cold cache, whole process"))
+        with ray_head(cpus, tmp) as (address, head_pid, auth):
+            ray_runs, local_runs = [], []
+            for rep in range(reps):
+                for side in ("jobs", "ray") if rep % 2 == 0 else ("ray", "jobs"):
+                    if side == "jobs":
+                        env = warm if cpus == 2 and rep == 0 else fresh_cache(tmp)
+                        local_runs.append(run_process(inspector_cmd("report", video, "--json", "--jobs", cpus), env=env))
+                    else:
+                        ray_runs.append(run_process(inspector_cmd("report", video, "--json", "--ray", address),
+                                                    env={**fresh_cache(tmp), **quiet, **auth}, also=head_pid))
+            outputs += [m.stdout for m in ray_runs + local_runs]
+            if cpus == 2:
+                warm_head = run_process(inspector_cmd("report", video, "--json", "--ray", address),
+                                        env={**warm, **quiet, **auth}, also=head_pid)
+        on_ray, local = _median_run(ray_runs), _median_run(local_runs)
+        ratio = statistics.median(r.wall_s / j.wall_s for r, j in zip(ray_runs, local_runs))
+        figures.append(Figure(f"ray_head_{cpus}cpu_{n}_video", on_ray.wall_s, "s", "Ray <= 1.25x --jobs",
+                              ratio <= 1.25, on_ray.peak_mib, local.wall_s, local.peak_mib,
+                              f"--ray to a running head of {cpus} CPU(s) (ray start --head) vs --jobs {cpus}, cold "
+                              f"cache, whole process, alternated x{reps}, medians; median Ray / --jobs of the "
+                              f"pairs {ratio:.2f}x; Ray's RSS counts the workers the head started for the run"))
+    on_local = run_process(inspector_cmd("report", video, "--json", "--ray", "--jobs", 2),
+                           env={**fresh_cache(tmp), **quiet})
+    outputs.append(on_local.stdout)
     warm_local = run_process(inspector_cmd("report", video, "--json", "--jobs", 2), env=warm)
     warm_ray = run_process(inspector_cmd("report", video, "--json", "--ray", "--jobs", 2), env={**warm, **quiet})
+    figures.append(Figure(f"ray_local_instance_2cpu_{n}_video", on_local.wall_s, "s", "report only", True,
+                          on_local.peak_mib, figures[0].baseline, figures[0].baseline_rss_mib,
+                          "--ray with no address: a local Ray instance of 2 CPUs started and stopped by the "
+                          "command, vs the median --jobs 2 above; cold cache, once"))
     figures.append(Figure("ray_fixed_cost", warm_ray.wall_s, "s", "report only", True, warm_ray.peak_mib,
                           warm_local.wall_s, warm_local.peak_mib,
-                          "warm metrics cache (no decoding): Ray's start and stop vs the local pool's"))
-    if any(json.loads(out) != json.loads(outputs[0]) for out in outputs + [warm_ray.stdout]):
+                          "warm metrics cache (no decoding): a local Ray instance's start and stop vs the local pool's"))
+    figures.append(Figure("ray_head_fixed_cost", warm_head.wall_s, "s", "report only", True, warm_head.peak_mib,
+                          warm_local.wall_s, warm_local.peak_mib,
+                          "warm metrics cache (no decoding): joining a running head of 2 CPUs and its "
+                          "workers' start vs the local pool's"))
+    reports = outputs + [warm_ray.stdout, warm_local.stdout, warm_head.stdout]
+    if any(json.loads(out) != json.loads(outputs[0]) for out in reports):
         raise AssertionError("report --ray differs from the local report")
     return figures
+
+
+def _median_run(runs: list[Measured]) -> Measured:
+    """The median wall time and the median peak RSS of ``runs``."""
+    return Measured(statistics.median(m.wall_s for m in runs), statistics.median(m.peak_mib for m in runs), "")
+
+
+@contextlib.contextmanager
+def ray_head(cpus: int, tmp: Path) -> Iterator[tuple[str, int, dict[str, str]]]:
+    """A Ray head of ``cpus`` CPUs (``ray start --head --block``, no dashboard), addressed at
+    127.0.0.1, as (address, pid of ``ray start``, the environment a driver needs: its token);
+    stopped at the end, every process it started gone before this returns. Its ports are free
+    ones (another head may run on this machine); it requires a token of its own (Ray >= 2.52
+    otherwise takes ~/.ray/auth_token where one exists, and drivers given an address send none)."""
+    import psutil
+
+    ray_cli = Path(sys.executable).with_name("ray")
+    port, client_port, agent_port = _free_ports(3)
+    temp_dir = Path(tempfile.mkdtemp(prefix="ray-", dir="/tmp"))  # short: Ray's socket paths must fit
+    log = tmp / f"ray-head-{port}.log"
+    auth = {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": uuid.uuid4().hex}
+    with open(log, "w") as out:
+        head = subprocess.Popen([str(ray_cli), "start", "--head", "--block", "--num-cpus", str(cpus),
+                                 "--include-dashboard=false", "--disable-usage-stats",
+                                 "--node-ip-address", "127.0.0.1", "--port", str(port),
+                                 "--ray-client-server-port", str(client_port),
+                                 "--dashboard-agent-listen-port", str(agent_port), "--temp-dir", str(temp_dir)],
+                                stdout=out, stderr=subprocess.STDOUT, env={**os.environ, **auth, "RAY_USAGE_STATS_ENABLED": "0"},
+                                start_new_session=True)
+    try:
+        deadline = time.monotonic() + 180
+        while "Ray runtime started" not in log.read_text():
+            if head.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"ray start --head failed: {log.read_text()[-2000:]}")
+            time.sleep(0.5)
+        yield f"127.0.0.1:{port}", head.pid, auth
+    finally:
+        started = [head, *(_children(psutil.Process(head.pid)))]
+        head.terminate()  # ray start --block stops what it started
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            head.wait(60)
+        _, alive = psutil.wait_procs([p for p in started if isinstance(p, psutil.Process)], timeout=30)
+        for p in [*alive, *([head] if head.poll() is None else [])]:
+            with contextlib.suppress(psutil.Error, ProcessLookupError):
+                p.kill()
+        head.wait(30)
+        import shutil
+
+        shutil.rmtree(temp_dir, ignore_errors=True)
+
+
+def _children(process) -> list:
+    import psutil
+
+    with contextlib.suppress(psutil.Error):
+        return process.children(recursive=True)
+    return []
+
+
+def _free_ports(k: int) -> list[int]:
+    sockets = [socket.socket() for _ in range(k)]
+    try:
+        for s in sockets:
+            s.bind(("127.0.0.1", 0))
+        return [s.getsockname()[1] for s in sockets]
+    finally:
+        for s in sockets:
+            s.close()
 
 
 # ----------------------------------------------------------------------------------------------

@@ -1,20 +1,24 @@
 """``--ray``: report and export jobs as Ray tasks, on a real local Ray instance of 2 CPUs.
 
 Ray starts slowly (seconds), so the tests are few: the command line's report is compared with the
-local run's JSON (its own Ray, in the command's process); the rest share one local instance that
-this module starts in the test process and stops at its end, checking that Ray's processes went
-with it. Addresses that lead nowhere are refused in seconds without Ray.
+local run's JSON (its own Ray, in the command's process, and a head started by ``ray start``, as
+a cluster user joins one); the rest share one local instance that this module starts in the test
+process and stops at its end, checking that Ray's processes went with it. Addresses that lead
+nowhere are refused in seconds without Ray.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
 import socket
 import subprocess
 import sys
+import tempfile
 import time
+import uuid
 from pathlib import Path
 
 import pytest
@@ -28,7 +32,7 @@ ray = pytest.importorskip("ray", reason="Ray is an optional extra: pip install -
 from test_export import rrd_verify  # noqa: E402
 
 from inspector.export.command import export_cli  # noqa: E402
-from inspector.jobs.ray import check_address, import_ray, ray_workers  # noqa: E402
+from inspector.jobs.ray import NICENESS_ENV, check_address, import_ray, ray_workers, worker_env  # noqa: E402
 from inspector.report.tasks import bundle_tasks  # noqa: E402
 
 pytestmark = pytest.mark.slow
@@ -56,8 +60,9 @@ def wait_gone(pids: set[int], deadline_s: float = 60) -> set[int]:
     return alive
 
 
-def inspector(*args: str, cache_dir: Path, timeout: float = 600) -> subprocess.CompletedProcess:
-    env = {**os.environ, "INSPECTOR_CACHE_DIR": str(cache_dir), "RAY_USAGE_STATS_ENABLED": "0"}
+def inspector(*args: str, cache_dir: Path, timeout: float = 600, env: dict[str, str] | None = None
+              ) -> subprocess.CompletedProcess:
+    env = {**os.environ, **(env or {}), "INSPECTOR_CACHE_DIR": str(cache_dir), "RAY_USAGE_STATS_ENABLED": "0"}
     return subprocess.run([sys.executable, "-m", "inspector", *map(str, args)], capture_output=True, text=True,
                           env=env, timeout=timeout)
 
@@ -88,6 +93,70 @@ def test_report_json_on_ray_is_the_local_report(imported_session, tmp_path):
     report = json.loads(on_ray.stdout)
     assert len(report["rollouts"]) == 6 and report["prompt_divergence"]  # every fixture, the prompt pair
     assert not wait_gone(ray_processes() - before), "Ray processes outlived the command"
+
+
+def free_ports(k: int) -> list[int]:
+    sockets = [socket.socket() for _ in range(k)]
+    for s in sockets:
+        s.bind(("127.0.0.1", 0))
+    ports = [s.getsockname()[1] for s in sockets]
+    for s in sockets:
+        s.close()
+    return ports
+
+
+def test_report_json_on_a_running_head_is_the_local_report(tmp_path):
+    """``--ray HOST:PORT`` to a head started by ``ray start --head`` (1 CPU, two short rollouts);
+    every process of the head is gone once it is stopped."""
+    import psutil
+
+    session = tmp_path / "demo"
+    shutil.copytree(DEMO, session, ignore=lambda d, names: [n for n in names if Path(d).name == "rollouts"
+                                                            and n not in ("single_f000", "single_f076")])
+    port, client_port, agent_port = free_ports(3)
+    temp_dir = Path(tempfile.mkdtemp(prefix="ray-", dir="/tmp"))  # Ray's socket paths must be short
+    log = tmp_path / "head.log"
+    auth = {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": uuid.uuid4().hex}  # not ~/.ray/auth_token, if any
+    with open(log, "w") as out:
+        head = subprocess.Popen([str(Path(sys.executable).with_name("ray")), "start", "--head", "--block",
+                                 "--num-cpus", "1", "--include-dashboard=false", "--disable-usage-stats",
+                                 "--node-ip-address", "127.0.0.1", "--port", str(port),
+                                 "--ray-client-server-port", str(client_port),
+                                 "--dashboard-agent-listen-port", str(agent_port), "--temp-dir", str(temp_dir)],
+                                stdout=out, stderr=subprocess.STDOUT, env={**os.environ, **auth},
+                                start_new_session=True)
+    started: list = []
+    try:
+        deadline = time.monotonic() + 120
+        while "Ray runtime started" not in log.read_text():
+            assert head.poll() is None and time.monotonic() < deadline, log.read_text()[-2000:]
+            time.sleep(0.5)
+        start = time.monotonic()  # no token sent: one line, at once, not Ray's minute of retries
+        refused = inspector("report", session, "--ray", f"127.0.0.1:{port}", cache_dir=tmp_path / "cache-ray",
+                            env={"RAY_AUTH_MODE": "disabled"})
+        assert time.monotonic() - start < 30
+        assert refused.returncode == 2 and refused.stderr == (
+            f"error: 127.0.0.1:{port}: the cluster requires token authentication: set RAY_AUTH_MODE=token, with "
+            "the cluster's token in RAY_AUTH_TOKEN, RAY_AUTH_TOKEN_PATH or ~/.ray/auth_token\n")
+        local = inspector("report", session, "--json", "--jobs", "1", cache_dir=tmp_path / "cache-local")
+        assert local.returncode == 0, local.stderr
+        on_ray = inspector("report", session, "--json", "--ray", f"127.0.0.1:{port}", cache_dir=tmp_path / "cache-ray",
+                           env=auth)
+        assert on_ray.returncode == 0, on_ray.stderr
+        assert f"inspector: Ray at 127.0.0.1:{port}, 1 CPU(s)" in on_ray.stderr
+        assert json.loads(on_ray.stdout) == json.loads(local.stdout)
+        assert len(json.loads(on_ray.stdout)["rollouts"]) == 2
+    finally:
+        with contextlib.suppress(psutil.Error):
+            started = psutil.Process(head.pid).children(recursive=True)
+        head.terminate()  # ray start --block stops what it started
+        head.wait(60)
+        _, alive = psutil.wait_procs(started, timeout=30)
+        for p in alive:
+            with contextlib.suppress(psutil.Error):
+                p.kill()
+        shutil.rmtree(temp_dir, ignore_errors=True)
+    assert not alive, f"the head's processes outlived it: {[p.pid for p in alive]}"
 
 
 def test_unreachable_cluster_is_one_line(tmp_path):
@@ -208,3 +277,12 @@ def test_export_on_ray_writes_what_the_local_export_writes(local_ray, broken_dem
     rrd_verify(ray_out / "single_f000.rrd")
     assert on_ray.err == local.err and "wrist.mp4" in on_ray.err  # the same one line
     assert on_ray.out.replace(str(ray_out), "OUT") == local.out.replace(str(local_out), "OUT")
+
+
+def test_ray_workers_run_at_the_niceness_of_local_workers(local_ray, monkeypatch):
+    """Ray starts task workers at niceness 15; this run's ask for 0 (a --jobs worker's), unless
+    the driver's environment says otherwise."""
+    assert ray.get(ray.remote(num_cpus=1)(lambda: os.nice(0)).remote()) == 0
+    assert worker_env()[NICENESS_ENV] == "0"
+    monkeypatch.setenv(NICENESS_ENV, "15")
+    assert worker_env()[NICENESS_ENV] == "15"

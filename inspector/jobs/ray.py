@@ -15,6 +15,10 @@ that cluster. An address is probed before Ray is asked, so one that nothing answ
 one-line error within seconds rather than Ray's minutes of retries. When this process is already
 connected (``ray.init`` called by a notebook or a test), that connection is used and left open.
 
+The workers run at niceness 0, as a ``--jobs`` worker does, not at Ray's 15 (:func:`worker_env`):
+at 15 they yield the CPU to every other process of the node, and a report on a node that runs
+anything else took up to twice as long as ``--jobs``.
+
 Ray is an optional dependency: ``pip install 'inspector[ray]'``.
 """
 
@@ -39,6 +43,11 @@ LOCAL = "local"
 INSTALL_HINT = "install with pip install 'inspector[ray]'"
 # How long an address may take to accept a TCP connection before it counts as unreachable [s].
 PROBE_TIMEOUT_S = 5.0
+# The niceness of this run's Ray workers, and the variable through which Ray takes it from a job.
+WORKER_NICENESS = 0
+NICENESS_ENV = "RAY_worker_niceness"
+# How a driver tells Ray (>= 2.52) to send its token.
+AUTH_MODE_ENV = "RAY_AUTH_MODE"
 _ADDRESS = re.compile(r"(?:ray://)?(?P<host>\[[^\]]+\]|[^\s:/\[\]]+):(?P<port>\d{1,5})")
 
 J = TypeVar("J")
@@ -124,9 +133,8 @@ def ray_workers(address: str, jobs: int | None = None) -> Iterator[RayWorkers]:
     check_address(address)
     local = address == LOCAL
     cpus = jobs or default_jobs()
-    options: dict[str, Any] = {"address": address, "logging_level": logging.ERROR, "log_to_driver": True}
-    if os.environ.get(CACHE_ENV_DIR):  # a cluster's workers see the driver's cache directory
-        options["runtime_env"] = {"env_vars": {CACHE_ENV_DIR: os.environ[CACHE_ENV_DIR]}}
+    options: dict[str, Any] = {"address": address, "logging_level": logging.ERROR, "log_to_driver": True,
+                               "runtime_env": {"env_vars": worker_env()}}
     if local:
         os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # nothing leaves the machine
         options.update(num_cpus=cpus, include_dashboard=False)
@@ -142,6 +150,21 @@ def ray_workers(address: str, jobs: int | None = None) -> Iterator[RayWorkers]:
         yield workers
     finally:
         ray.shutdown()
+
+
+def worker_env() -> dict[str, str]:
+    """Environment variables of this run's Ray workers (the job's runtime env).
+
+    The driver's metrics cache directory, where set, so a cluster's workers share it; and the
+    workers' niceness: Ray starts task workers at niceness 15, below every other process on the
+    node, so on a node that also runs other work they get a fraction of a CPU each. Ours run at
+    :data:`WORKER_NICENESS` (what a ``--jobs`` worker runs at), as Ray's own job supervisor does;
+    ``RAY_worker_niceness`` set on the driver wins (15: Ray's default).
+    """
+    env = {NICENESS_ENV: os.environ.get(NICENESS_ENV, str(WORKER_NICENESS))}
+    if os.environ.get(CACHE_ENV_DIR):
+        env[CACHE_ENV_DIR] = os.environ[CACHE_ENV_DIR]
+    return env
 
 
 def check_address(address: str) -> None:
@@ -169,9 +192,15 @@ def check_address(address: str) -> None:
     if not speaks_grpc:  # e.g. the dashboard's port: Ray would retry for many minutes
         raise InspectorError(address, "answers, but not as Ray's GCS or Ray Client (both speak gRPC; by "
                                       "default the GCS listens on port 6379, Ray Client on 10001)")
-    if not _serves_ray(endpoint, client_first=address.startswith("ray://")):  # another gRPC service
+    serves = _serves_ray(endpoint, client_first=address.startswith("ray://"))
+    if serves is None:  # another gRPC service
         raise InspectorError(address, "a gRPC service, but not Ray's GCS or Ray Client (it knows neither's "
                                       "methods; by default the GCS listens on port 6379, Ray Client on 10001)")
+    # Given an address, Ray sends no token unless told to, and retries for a minute before it fails.
+    if serves == "token" and address != "auto" and os.environ.get(AUTH_MODE_ENV, "").lower() != "token":
+        raise InspectorError(address, f"the cluster requires token authentication: set {AUTH_MODE_ENV}=token, "
+                                      "with the cluster's token in RAY_AUTH_TOKEN, RAY_AUTH_TOKEN_PATH or "
+                                      "~/.ray/auth_token")
 
 
 def _answers_http2(conn: socket.socket) -> bool:
@@ -195,13 +224,14 @@ _GCS_METHOD = "/ray.rpc.NodeInfoGcsService/GetClusterId"
 _CLIENT_METHOD = "/ray.rpc.RayletDriver/ClusterInfo"
 
 
-def _serves_ray(endpoint: tuple[str, int], client_first: bool) -> bool:
-    """False when the gRPC server at ``endpoint`` has neither Ray service (another gRPC server);
-    True otherwise, whatever else goes wrong (Ray itself then says what)."""
+def _serves_ray(endpoint: tuple[str, int], client_first: bool) -> str | None:
+    """None when the gRPC server at ``endpoint`` has neither Ray service (another gRPC server);
+    ``token`` when Ray asked for an authentication token; ``ray`` otherwise, whatever else goes
+    wrong (Ray itself then says what)."""
     try:
         import grpc  # Ray's own dependency
     except ImportError:
-        return True
+        return "ray"
     host, port = endpoint
     methods = (_CLIENT_METHOD, _GCS_METHOD) if client_first else (_GCS_METHOD, _CLIENT_METHOD)
     with grpc.insecure_channel(f"[{host}]:{port}" if ":" in host else f"{host}:{port}") as channel:
@@ -211,8 +241,10 @@ def _serves_ray(endpoint: tuple[str, int], client_first: bool) -> bool:
             except grpc.RpcError as exc:
                 if exc.code() == grpc.StatusCode.UNIMPLEMENTED:
                     continue
-            return True
-    return False
+                if exc.code() == grpc.StatusCode.UNAUTHENTICATED:
+                    return "token"
+            return "ray"
+    return None
 
 
 def _auto_endpoint() -> tuple[str, int] | None:
