@@ -99,7 +99,8 @@ def _checker(tp: Any) -> Check:
                                      else _say(where, "a finite float", value))
     if tp is int:
         return lambda value, where: (None if type(value) is int and -MAX_WHOLE <= value <= MAX_WHOLE
-                                     else _say(where, f"an integer within +-{MAX_WHOLE}", value))
+                                     else _say(where, f"an integer within +-{MAX_WHOLE}" if type(value) is int
+                                               else "an integer", value))
     if tp in (str, bool):
         return lambda value, where: None if type(value) is tp else _say(where, _name(tp), value)
     if tp is None or tp is type(None):

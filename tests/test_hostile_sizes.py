@@ -276,3 +276,18 @@ def test_a_long_path_keeps_its_start_and_its_file_name():
     line = str(InspectorError(path, what))
     assert line.startswith("/data/deep/") and "/deep/meta/info.json: fps: expected a number" in line
     assert line.count("...") == 2 and f"({len(what):,} characters in all)" in line and len(line) < LONGEST_LINE
+
+
+@pytest.mark.parametrize("layout", ["dataset", "eval"])
+def test_a_metadata_file_of_empty_lists_past_32_mb_is_refused_unparsed(tmp_path, layout):
+    """12 million empty lists take a GB as objects: the file's size is checked before it is parsed."""
+    if layout == "dataset":
+        root, file = _dataset(tmp_path), "meta/info.json"
+    else:
+        root, file = tmp_path / "out", "eval_info.json"
+        write_eval(root, {("so101_sim", 0): [True]}, steps=8)
+    text = (root / file).read_text()
+    (root / file).write_text(text.rstrip()[:-1] + ', "padding": [' + "[]," * 12_000_000 + "[]]}")
+    run = cli(tmp_path, "info", root)
+    assert_one_error_line(run, file, "bytes: larger than any metadata file (at most 33,554,432 bytes are read)")
+    assert run.peak_mib < PEAK_RSS_MIB, run.peak_mib

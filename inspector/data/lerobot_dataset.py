@@ -62,7 +62,7 @@ from ..errors import InspectorError
 from ..schema import MAX_WHOLE, shown, whole_number
 from ..units import JOINT_NAMES, Units, canonical_joint_name, guess_arm_units, joint_order, parse_units
 from .hub import fetch_dataset
-from .session import ABSURD_VALUE, check_json_size, fps_problem
+from .session import ABSURD_VALUE, check_json_size, fps_problem, json_too_large
 from .video import VideoClip
 
 # --- versions -------------------------------------------------------------------------------------
@@ -136,6 +136,8 @@ FRAME_COUNT_SLACK = 1
 def is_lerobot_dataset(path: str | Path) -> bool:
     """True when ``path/meta/info.json`` exists and names a ``codebase_version``."""
     info = _expand(path) / INFO_PATH
+    if json_too_large(info):
+        return True  # named like a dataset's: the reader refuses its size in one line
     try:
         return isinstance(obj := json.loads(info.read_text()), dict) and CODEBASE_VERSION_KEY in obj
     except (OSError, ValueError, RecursionError):

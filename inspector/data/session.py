@@ -259,6 +259,15 @@ def check_json_size(path: Path) -> None:
                                           f"(at most {MAX_JSON_BYTES:,} bytes are read)")
 
 
+def json_too_large(path: Path) -> bool:
+    """True for a file past :data:`MAX_JSON_BYTES` (a layout's detection, which reads a JSON file
+    to tell whose it is, leaves it to the reader, whose :func:`check_json_size` refuses it)."""
+    try:
+        return path.stat().st_size > MAX_JSON_BYTES
+    except OSError:
+        return False
+
+
 def read_json_object(path: Path) -> dict[str, Any]:
     """:func:`read_json` of a file that must hold an object."""
     data = read_json(path)

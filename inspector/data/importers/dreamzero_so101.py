@@ -42,7 +42,7 @@ from ...errors import InspectorError, require
 from ...schema import whole_number
 from ...units import JOINT_NAMES, Units
 from ..lerobot_dataset import LeRobotDataset, find_dataset
-from ..session import SessionWriter, check_values, load_array, read_json_object
+from ..session import SessionWriter, check_values, json_too_large, load_array, read_json_object
 from ..video import decode
 
 MOSAIC_VIEWS = (("front", 0, 0), ("top", 0, 1), ("gripper", 1, 0))  # (view, row, col) of the 2x2
@@ -81,6 +81,8 @@ def _classify(path: Path) -> SourceDir | None:
         return SourceDir(path, "autoregressive")
     meta = path / "meta.json"
     if meta.is_file():
+        if json_too_large(meta):
+            return SourceDir(path, "single_chunk")  # ours by name: the importer refuses its size
         try:
             data = json.loads(meta.read_text())
         except (ValueError, RecursionError):

@@ -57,7 +57,7 @@ from ..lerobot_dataset import (
     read_jsonl,
     template_problem,
 )
-from ..session import ABSURD_VALUE, ArrayValue, Rollout, Session, SessionWriter, read_json_object
+from ..session import ABSURD_VALUE, ArrayValue, Rollout, Session, SessionWriter, json_too_large, read_json_object
 from ..video import VideoClip, probe
 from .calibration import WRONG_CALIBRATION_SHARE, Calibration, parse_calibration
 
@@ -95,6 +95,8 @@ def is_groot_dreams(path: str | Path) -> bool:
     if not ((meta / "modality.json").is_file() and (meta / "episodes.jsonl").is_file()
             and (meta / "info.json").is_file()):
         return False
+    if json_too_large(meta / "info.json"):
+        return True  # ours by its layout: the reader refuses its size
     try:
         info = json.loads((meta / "info.json").read_text())
     except (OSError, ValueError, RecursionError):
