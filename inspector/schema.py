@@ -17,6 +17,13 @@ Example::
 
     mismatch({"mean": 1.0, "per_joint": [0.0] * 6}, Drift)    # None: it conforms
     mismatch({"mean": "1.0", "per_joint": []}, Drift)         # "mean: a float expected, got '1.0'"
+
+Numbers a reader takes from a file (any layout's JSON metadata: a count, an index, a length, a
+size) go through :func:`whole_number` / :func:`finite_number` where they are read: JSON integers have
+no limit (``2**70``, ``10**400``), and one past what numpy, a float or an allocation can hold is a
+traceback (``OverflowError``) or an allocation far from where it was read. Every integer is
+checked against a bound (:data:`MAX_WHOLE` unless the field has a smaller one), every number is
+checked finite without converting an integer to a float first.
 """
 
 from __future__ import annotations
@@ -26,7 +33,10 @@ import math
 import types
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Annotated, Any, Literal, Union, get_args, get_origin, get_type_hints, is_typeddict
+
+from .errors import InspectorError
 
 
 @dataclass(frozen=True)
@@ -87,7 +97,11 @@ def _checker(tp: Any) -> Check:
     if tp is float:
         return lambda value, where: (None if type(value) is float and math.isfinite(value)
                                      else _say(where, "a finite float", value))
-    if tp in (int, str, bool):
+    if tp is int:
+        return lambda value, where: (None if type(value) is int and -MAX_WHOLE <= value <= MAX_WHOLE
+                                     else _say(where, f"an integer within +-{MAX_WHOLE}" if type(value) is int
+                                               else "an integer", value))
+    if tp in (str, bool):
         return lambda value, where: None if type(value) is tp else _say(where, _name(tp), value)
     if tp is None or tp is type(None):
         return lambda value, where: None if value is None else _say(where, "null", value)
@@ -117,7 +131,9 @@ def _list_checker(item_type: Any) -> Check:
         if item_type is float or nullable_floats:
             if all(type(v) is float and math.isfinite(v) or nullable_floats and v is None for v in value):
                 return None
-        elif item_type in (int, str, bool) and all(type(v) is item_type for v in value):
+        elif item_type in (str, bool) and all(type(v) is item_type for v in value):
+            return None
+        elif item_type is int and all(type(v) is int and -MAX_WHOLE <= v <= MAX_WHOLE for v in value):
             return None  # a frame match's runs: thousands of short lists of indexes
         return next((m for i, v in enumerate(value) if (m := item(v, f"{where}[{i}]"))), None)
     return check_list
@@ -167,6 +183,83 @@ def _name(tp: Any) -> str:
 
 
 def _say(where: str, expected: str, value: Any) -> str:
-    shown = repr(value)
-    return f"{where or 'the record'}: {expected} expected, got {shown if len(shown) <= 40 else shown[:37] + '...'}"
+    return f"{where or 'the record'}: {expected} expected, got {shown(value)}"
+
+
+# ----------------------------------------------------------------------------------------------
+# Numbers read from a file
+
+# The largest whole number a file may give for a count, an index, a length or a size: the largest
+# integer a float64 holds exactly (a frame index becomes a time as index / fps), and far enough
+# inside int64 (numpy's indexes) that a sum or a product with a small factor cannot wrap. No
+# dataset has that many frames; a field with a tighter natural bound passes its own ``maximum``.
+MAX_WHOLE = 2**53 - 1
+
+
+def shown(value: Any, limit: int = 40) -> str:
+    """``value`` as an error message shows it: its repr cut to ``limit`` characters, an integer
+    of many digits by its size (``an integer of 22 digits``), never the whole of a long value."""
+    if type(value) is int and not -10**15 < value < 10**15:
+        return f"an integer of {len(str(abs(value)))} digits"
+    if isinstance(value, (str, list, dict)) and len(value) > limit:
+        value = value[:limit] if not isinstance(value, dict) else dict(list(value.items())[:4])
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _whole_words(minimum: int) -> str:
+    return {0: "a non-negative integer", 1: "a positive integer"}.get(minimum, f"an integer >= {minimum}")
+
+
+def whole_problem(value: Any, minimum: int = 0, maximum: int = MAX_WHOLE) -> str | None:
+    """What is wrong with ``value`` (parsed JSON) as a whole number in [minimum, maximum], or None:
+    an ``int`` (not a bool, not a float) within the bounds."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        return f"expected {_whole_words(minimum)}, found {shown(value)}"
+    if value > maximum:
+        return f"expected {_whole_words(minimum)} no larger than {maximum}, found {shown(value)}"
+    return None
+
+
+def whole_number(value: Any, file: str | Path, field: str, minimum: int = 0, maximum: int = MAX_WHOLE) -> int:
+    """``value`` read from ``file``'s ``field`` as a whole number in [minimum, maximum].
+
+    Raises:
+        InspectorError: ``<file>: <field>: expected a non-negative integer..., found ...``.
+    """
+    problem = whole_problem(value, minimum, maximum)
+    if problem is not None:
+        raise InspectorError(file, f"{field}: {problem}")
+    return int(value)
+
+
+_FLOAT_MAX = 1.7976931348623157e308
+
+
+def number_problem(value: Any, minimum: float = -math.inf, maximum: float = math.inf) -> str | None:
+    """What is wrong with ``value`` (parsed JSON) as a finite number in [minimum, maximum], or None.
+    An integer is compared as it is (``10**400`` has no float: ``float()`` and ``math.isfinite``
+    of it raise)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return f"expected a finite number, found {shown(value)}"
+    if isinstance(value, float) and not math.isfinite(value) or abs(value) > _FLOAT_MAX:
+        return f"expected a finite number, found {shown(value)}"
+    if not minimum <= value <= maximum:
+        bounds = (f"in [{minimum:g}, {maximum:g}]" if math.isfinite(minimum) and math.isfinite(maximum)
+                  else f">= {minimum:g}" if math.isfinite(minimum) else f"<= {maximum:g}")
+        return f"expected a finite number {bounds}, found {shown(value)}"
+    return None
+
+
+def finite_number(value: Any, file: str | Path, field: str, minimum: float = -math.inf,
+                  maximum: float = math.inf) -> float:
+    """``value`` read from ``file``'s ``field`` as a finite float in [minimum, maximum].
+
+    Raises:
+        InspectorError: naming the file and the field.
+    """
+    problem = number_problem(value, minimum, maximum)
+    if problem is not None:
+        raise InspectorError(file, f"{field}: {problem}")
+    return float(value)
 

@@ -59,9 +59,10 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import InspectorError
+from ..schema import MAX_WHOLE, shown, whole_number
 from ..units import JOINT_NAMES, Units, canonical_joint_name, guess_arm_units, joint_order, parse_units
 from .hub import fetch_dataset
-from .session import ABSURD_VALUE, fps_problem
+from .session import ABSURD_VALUE, check_json_size, fps_problem, json_too_large
 from .video import VideoClip
 
 # --- versions -------------------------------------------------------------------------------------
@@ -135,6 +136,8 @@ FRAME_COUNT_SLACK = 1
 def is_lerobot_dataset(path: str | Path) -> bool:
     """True when ``path/meta/info.json`` exists and names a ``codebase_version``."""
     info = _expand(path) / INFO_PATH
+    if json_too_large(info):
+        return True  # named like a dataset's: the reader refuses its size in one line
     try:
         return isinstance(obj := json.loads(info.read_text()), dict) and CODEBASE_VERSION_KEY in obj
     except (OSError, ValueError, RecursionError):
@@ -485,6 +488,7 @@ class LeRobotDataset:
         f = self._info_file
         if not f.is_file():
             raise InspectorError(f, "not a LeRobot dataset: meta/info.json is missing")
+        check_json_size(f)
         try:
             info = json.loads(f.read_text())
         except (OSError, UnicodeDecodeError) as exc:
@@ -508,9 +512,10 @@ class LeRobotDataset:
     def _info_number(self, key: str, positive: bool = False) -> float:
         value = self.info.get(key)
         if (isinstance(value, bool) or not isinstance(value, (int, float))
-                or not (isinstance(value, int) or np.isfinite(value)) or value < 0 or (positive and value == 0)):
+                or not (isinstance(value, int) or np.isfinite(value)) or value < 0 or (positive and value == 0)
+                or value > MAX_WHOLE):
             raise InspectorError(self._info_file, f"'{key}' must be a {'positive' if positive else 'non-negative'}"
-                                                  f" number, found {value!r}")
+                                                  f" number no larger than {MAX_WHOLE}, found {shown(value)}")
         return value
 
     def _info_fps(self) -> float:
@@ -520,12 +525,18 @@ class LeRobotDataset:
         return self.info[FPS_KEY]  # as written (30, not 30.0: `info` shows it)
 
     def _info_template(self, key: str, default: str) -> str:
-        """A path template from info.json (LeRobot writes null for video_path without videos)."""
+        """A path template from info.json (LeRobot writes null for video_path without videos),
+        checked now (:func:`template_problem`): a bad one is refused when the dataset opens, not
+        when a path is filled from it."""
         value = self.info.get(key)
         if value is None:
             return default
         if not isinstance(value, str):
-            raise InspectorError(self._info_file, f"'{key}' must be a path template string, found {value!r}")
+            raise InspectorError(self._info_file, f"'{key}' must be a path template string, found {shown(value)}")
+        fields = V30_TEMPLATE_FIELDS if self.codebase_version == V30 else V21_TEMPLATE_FIELDS
+        problem = template_problem(value, fields if key == DATA_PATH_KEY else {**fields, "video_key": "front"})
+        if problem is not None:
+            raise InspectorError(self._info_file, f"'{key}': {problem}")
         return value
 
     def _joint_feature_order(self, key: str) -> npt.NDArray[np.int64]:
@@ -682,7 +693,7 @@ class LeRobotDataset:
             ep, length = row.get(EPISODE_INDEX_KEY), row.get(EP_LENGTH)
             if not (_is_whole(ep) and _is_whole(length)):
                 raise InspectorError(f, f"line {line_no}: needs integer '{EPISODE_INDEX_KEY}' and "
-                                        f"'{EP_LENGTH}', found {ep!r} and {length!r}")
+                                        f"'{EP_LENGTH}', found {shown(ep)} and {shown(length)}")
             assert isinstance(ep, int) and isinstance(length, int)
             tasks = [str(t) for t in row.get(EP_TASKS) or []] if isinstance(row.get(EP_TASKS), list) else []
             _check_episode(f, f"line {line_no}", ep, length)
@@ -721,7 +732,8 @@ class LeRobotDataset:
         pairs = []
         for line_no, row in read_jsonl(f):
             try:
-                pairs.append((int(row[TASK_INDEX_KEY]), str(row["task"])))
+                pairs.append((whole_number(row[TASK_INDEX_KEY], f, f"line {line_no}: '{TASK_INDEX_KEY}'"),
+                              str(row["task"])))
             except (KeyError, TypeError, ValueError, OverflowError):
                 raise InspectorError(f, f"line {line_no}: needs integer '{TASK_INDEX_KEY}' and "
                                         f"'task'") from None
@@ -809,6 +821,53 @@ class LeRobotDataset:
 # ==================================================================================================
 # helpers
 # ==================================================================================================
+
+# What a path template may be filled from, with a value of each field's type (checked on it).
+V30_TEMPLATE_FIELDS: dict[str, Any] = {"chunk_index": 0, "file_index": 0}
+V21_TEMPLATE_FIELDS: dict[str, Any] = {"episode_chunk": 0, "episode_index": 0}
+# The widest format a template field may ask for (``{episode_index:06d}`` asks for 6), and the
+# longest template: a path longer than a file system takes is no path [characters].
+MAX_TEMPLATE_WIDTH = 32
+MAX_TEMPLATE_CHARS = 1024
+_FORMAT_SPEC = re.compile(r"(?:.?[<>=^])?[+\- ]?z?#?0?(?P<width>\d*)[,_]?(?:\.(?P<precision>\d+))?[bcdeEfFgGnosxX%]?")
+
+
+def template_problem(template: str, fields: dict[str, Any]) -> str | None:
+    """What is wrong with ``template`` as a path template filled from ``fields`` (their names and
+    example values), or None: only those names (no attribute or index lookups, no positional
+    ``{}``), each formatted with a plain spec of width and precision at most
+    :data:`MAX_TEMPLATE_WIDTH` (``{episode_index:>300000000}`` would be a 300 MB path), at most
+    :data:`MAX_TEMPLATE_CHARS` long, filled without error from the example values, and inside the
+    dataset (no ``..``, not absolute)."""
+    import string
+
+    if len(template) > MAX_TEMPLATE_CHARS:
+        return f"a template of {len(template):,} characters (at most {MAX_TEMPLATE_CHARS})"
+    known = sorted(fields)
+    try:
+        parts = list(string.Formatter().parse(template))
+    except ValueError as exc:
+        return f"template {shown(template)} is not a format string ({exc})"
+    for _, name, spec, conversion in parts:
+        if name is None:
+            continue
+        if name not in fields:
+            return f"template {shown(template)}: unknown field {shown(name)}; known: {known}"
+        match = _FORMAT_SPEC.fullmatch(spec or "")
+        if match is None or conversion not in (None, "s"):
+            return f"template {shown(template)}: field {name!r} has an unsupported format {shown(spec)}"
+        widths = [int(w) for w in (match["width"], match["precision"]) if w]
+        if any(w > MAX_TEMPLATE_WIDTH for w in widths):
+            return (f"template {shown(template)}: field {name!r} asks for a width of {max(widths)} "
+                    f"(at most {MAX_TEMPLATE_WIDTH})")
+    try:
+        template.format(**fields)
+    except (KeyError, IndexError, ValueError, AttributeError, TypeError) as exc:
+        return f"template {shown(template)} cannot be filled from {known} ({exc})"
+    if ".." in Path(template).parts or Path(template).is_absolute():
+        return f"template {shown(template)} leaves the dataset"
+    return None
+
 
 def _expand(path: str | Path) -> Path:
     """``~`` expanded; an unknown ``~user`` stays as written (``Path.expanduser`` would raise)."""
@@ -907,10 +966,13 @@ def _is_whole(value: Any) -> bool:
 
 
 def _check_episode(f: Path, where: str, index: Any, length: Any) -> None:
-    """An episode's metadata row names a non-negative index and a positive length."""
+    """An episode's metadata row names a non-negative index and a positive length (both no
+    larger than :data:`MAX_WHOLE`)."""
     if not index >= 0 or not length >= 1:
         raise InspectorError(f, f"{where}: '{EPISODE_INDEX_KEY}' must be >= 0 and '{EP_LENGTH}' >= 1, "
-                                f"found {index} and {length}")
+                                f"found {shown(index)} and {shown(length)}")
+    whole_number(index, f, f"{where}: '{EPISODE_INDEX_KEY}'")
+    whole_number(length, f, f"{where}: '{EP_LENGTH}'", minimum=1)
 
 
 def _describe_indices(indices: list[int]) -> str:

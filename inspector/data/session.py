@@ -45,6 +45,7 @@ import numpy.typing as npt
 
 from .._files import mkdtemp_sibling, mkstemp_sibling, short_name
 from ..errors import InspectorError, require
+from ..schema import shown, whole_number
 from ..units import JOINT_NAMES, Units, parse_units
 from .video import VideoClip, encode_h264, probe
 
@@ -76,6 +77,12 @@ ABSURD_VALUE = 1e100
 # them step times and video timestamps overflow or collapse (1e308 fps, 1e-300 fps) [frames/s].
 MIN_FPS = 0.001
 MAX_FPS = 1000.0
+
+
+# The largest JSON document read whole (metadata: session.json, rollout.json, info.json, ...; none
+# is more than a few MB). Parsed JSON takes up to ~25 times its size in objects (``[[],[],...]``),
+# so this keeps any one document's objects well under a GB [bytes].
+MAX_JSON_BYTES = 32 * 1024 * 1024
 
 
 def fps_problem(value: object) -> str | None:
@@ -225,6 +232,7 @@ def read_json(path: Path) -> Any:
     """
     if not path.is_file():
         raise InspectorError(path, "is a directory, not a file" if path.is_dir() else "file not found")
+    check_json_size(path)
     try:
         data = json.loads(path.read_bytes())
     except OSError as exc:
@@ -235,6 +243,29 @@ def read_json(path: Path) -> Any:
     if found is not None:
         raise InspectorError(path, f"{found[0]}: non-finite number {found[1]} (JSON has no NaN or Infinity)")
     return data
+
+
+def check_json_size(path: Path) -> None:
+    """Refuse a JSON document past :data:`MAX_JSON_BYTES` before it is read.
+
+    Raises:
+        InspectorError: naming the file and its size.
+    """
+    try:
+        size = path.stat().st_size
+    except OSError as exc:
+        raise InspectorError(path, f"cannot read ({exc.strerror or exc})") from None
+    require(size <= MAX_JSON_BYTES, path, f"{size:,} bytes: larger than any metadata file "
+                                          f"(at most {MAX_JSON_BYTES:,} bytes are read)")
+
+
+def json_too_large(path: Path) -> bool:
+    """True for a file past :data:`MAX_JSON_BYTES` (a layout's detection, which reads a JSON file
+    to tell whose it is, leaves it to the reader, whose :func:`check_json_size` refuses it)."""
+    try:
+        return path.stat().st_size > MAX_JSON_BYTES
+    except OSError:
+        return False
 
 
 def read_json_object(path: Path) -> dict[str, Any]:
@@ -383,7 +414,7 @@ def load_rollout(root: str | Path, units: Units | None = None, lazy: bool = Fals
             return default
         value = meta[key]
         ok = isinstance(value, kind) and not (isinstance(value, bool) and bool not in _as_tuple(kind))
-        require(ok, meta_path, f"{key}: expected {_type_names(kind)}, found {value!r}")
+        require(ok, meta_path, f"{key}: expected {_type_names(kind)}, found {shown(value)}")
         return value
 
     kind = get("kind", str)
@@ -419,6 +450,11 @@ def load_rollout(root: str | Path, units: Units | None = None, lazy: bool = Fals
     gt_len = gt.get("episode_length")
     require(gt_len is None or (isinstance(gt_len, int) and not isinstance(gt_len, bool) and gt_len > 0),
             meta_path, f"gt.episode_length: expected a positive integer, found {gt_len!r}")
+    for name, value, least in (("horizon", horizon, 1), ("executed_per_chunk", executed, 1),
+                               ("frames_per_chunk", frames_per_chunk, 1), ("start_frame", start_frame, 0),
+                               ("episode_index", episode_index, 0), ("gt.episode_length", gt_len, 1)):
+        if value is not None:  # below the least is said above; this bounds them from above
+            whole_number(value, meta_path, name, minimum=least)
 
     arrays: dict[str, NpyFile | ArrayValue] = {"actions": NpyFile(root / ACTIONS_FILE, ("n_chunks", horizon, len(JOINT_NAMES)))}
     n_chunks = arrays["actions"].shape[0]

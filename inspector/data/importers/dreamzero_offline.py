@@ -25,6 +25,7 @@ episode and start frame (flags, or the sidecar) supply it.
 
 from __future__ import annotations
 
+import array
 import csv
 import math
 import tempfile
@@ -37,9 +38,10 @@ import numpy as np
 import numpy.typing as npt
 
 from ...errors import InspectorError, require
+from ...schema import MAX_WHOLE, finite_number, shown, whole_number
 from ...units import JOINT_NAMES, Units, joint_order
 from ..lerobot_dataset import LeRobotDataset, find_dataset
-from ..session import SessionWriter, check_apart, check_values, read_json_object
+from ..session import SessionWriter, check_apart, check_values, fps_problem, read_json_object
 from ..video import VideoClip, encode_h264, probe
 from .dreamzero_so101 import MOSAIC_VIEWS, check_episode_flag, missing_episode, tag_from_name
 
@@ -57,6 +59,10 @@ FRAMES_PER_DECODED_CHUNK = 9
 # only its playback speed) [Hz].
 DEFAULT_ACTION_FPS = 30.0
 UNITS = Units("degrees")
+# The most actions a chunk may have (offline_inference.py's have 24), and the longest field of
+# line of predicted_actions.csv (seven numbers of a few dozen characters each).
+MAX_ACTIONS_PER_CHUNK = 4096
+MAX_CSV_LINE_CHARS = 4096
 # The three views of a run held at once while importing it (a 60-chunk run's 481 frames take
 # ~245 MB); a longer run is cut view by view, decoding the mosaic three times [bytes].
 VIEWS_IN_MEMORY_BYTES = 256 * 1024 * 1024
@@ -135,8 +141,17 @@ def read_run(path: Path, link: GtLink | None = None, start_frame: int | None = N
     """
     meta = read_json_object(path / METADATA) if (path / METADATA).is_file() else {}
     warnings = [] if meta else [f"{METADATA} not found: chunk layout inferred from the files"]
-    per_chunk = _positive_int(meta, "actions_per_chunk", path / METADATA, ACTIONS_PER_CHUNK)
-    flat = _read_actions_csv(path / ACTIONS_CSV)
+    per_chunk = _positive_int(meta, "actions_per_chunk", path / METADATA, ACTIONS_PER_CHUNK,
+                              maximum=MAX_ACTIONS_PER_CHUNK)
+    # The frames first (the video's packets, or the PNGs): they bound the chunks, and so the rows
+    # of the CSV worth reading; a CSV of millions of rows beside a short video is read no further.
+    video, n_frames = _count_frames(path)
+    keeps_first, drops_later = _frame_rule(meta, path)
+    new_frames = FRAMES_PER_DECODED_CHUNK - (1 if drops_later else 0)
+    most_chunks = max(0, n_frames - (1 if drops_later and keeps_first else 0)) // new_frames
+    flat = _read_actions_csv(path / ACTIONS_CSV, max_rows=most_chunks * per_chunk,
+                             why=f"{video or path / FRAMES_DIR}'s {n_frames} frames make at most {most_chunks} "
+                                 f"chunk(s) of {per_chunk} actions")
     require(flat.shape[0] % per_chunk == 0, path / ACTIONS_CSV,
             f"{flat.shape[0]} rows are not whole chunks of {per_chunk} (metadata.json actions_per_chunk)")
     n_chunks = flat.shape[0] // per_chunk
@@ -153,7 +168,6 @@ def read_run(path: Path, link: GtLink | None = None, start_frame: int | None = N
         states = np.vstack([start[None], actions[:, -1]])  # each chunk is fed the last action before it
     else:
         warnings.append("no input_joint_positions: the arm's starting pose is unknown")
-    video, n_frames = _count_frames(path)
     frames_per_chunk = _frames_per_chunk(meta, path, n_chunks, n_frames, video)
     gt = _gt_link(path, link, start_frame)
     return OfflineRun(path=path, actions=actions, states=states, prompt=prompt, n_frames=n_frames,
@@ -161,45 +175,60 @@ def read_run(path: Path, link: GtLink | None = None, start_frame: int | None = N
                       warnings=warnings)
 
 
-def _read_actions_csv(path: Path) -> npt.NDArray[np.float64]:
-    """(N, 6) rows of ``predicted_actions.csv`` in JOINT_NAMES order (columns mapped by name)."""
+def _read_actions_csv(path: Path, max_rows: int | None = None, why: str = "") -> npt.NDArray[np.float64]:
+    """(N, 6) rows of ``predicted_actions.csv`` in JOINT_NAMES order (columns mapped by name),
+    streamed row by row into one array. ``max_rows``: the most rows the run can hold (``why``
+    says why); a row past them is refused before any more of the file is read."""
+    flat = array.array("d")
     try:
         with path.open(newline="") as f:
-            rows = list(csv.reader(f))
+            rows = csv.reader(_bounded_lines(f, path))
+            first = next(rows, None)
+            require(first is not None, path, "empty file: expected the header step,shoulder_pan,...,gripper")
+            assert first is not None
+            header = [h.strip() for h in first]
+            require("step" in header, path, f"header: no 'step' column (found {shown(header, 200)})")
+            joints = [h for h in header if h != "step"]
+            try:
+                order = joint_order(joints, "header")
+            except ValueError as exc:
+                raise InspectorError(path, str(exc)) from None
+            columns = [header.index(j) for j in joints]
+            step_col = header.index("step")
+            for i, row in enumerate(rows):
+                line = i + 2
+                require(max_rows is None or i < max_rows, path,
+                        f"line {line}: more than {max_rows} rows, but {why}")
+                require(len(row) == len(header), path, f"line {line}: {len(row)} fields, the header has {len(header)}")
+                try:
+                    step = int(row[step_col])
+                except ValueError:
+                    raise InspectorError(path, f"line {line}, step: not a whole number ({shown(row[step_col])})") from None
+                require(step == i, path, f"line {line}, step: {shown(step)}, expected {i} (steps count from 0 row by row)")
+                for j, c in enumerate(columns):
+                    try:
+                        value = float(row[c])
+                    except ValueError:
+                        raise InspectorError(path, f"line {line}, {joints[j]}: not a number ({shown(row[c])})") from None
+                    require(math.isfinite(value), path, f"line {line}, {joints[j]}: non-finite number {value}")
+                    flat.append(value)
     except UnicodeDecodeError:
         raise InspectorError(path, "not a text CSV file") from None
     except csv.Error as exc:
         raise InspectorError(path, f"not a readable CSV file ({exc})") from None
-    require(len(rows) >= 1, path, "empty file: expected the header step,shoulder_pan,...,gripper")
-    header = [h.strip() for h in rows[0]]
-    require("step" in header, path, f"header: no 'step' column (found {header})")
-    joints = [h for h in header if h != "step"]
-    try:
-        order = joint_order(joints, "header")
-    except ValueError as exc:
-        raise InspectorError(path, str(exc)) from None
-    columns = [header.index(j) for j in joints]
-    step_col = header.index("step")
-    values = np.empty((len(rows) - 1, len(JOINT_NAMES)))
-    for i, row in enumerate(rows[1:]):
-        line = i + 2
-        require(len(row) == len(header), path, f"line {line}: {len(row)} fields, the header has {len(header)}")
-        try:
-            step = int(row[step_col])
-        except ValueError:
-            raise InspectorError(path, f"line {line}, step: not a whole number ({row[step_col]!r})") from None
-        require(step == i, path, f"line {line}, step: {step}, expected {i} (steps count from 0 row by row)")
-        for j, c in enumerate(columns):
-            try:
-                value = float(row[c])
-            except ValueError:
-                raise InspectorError(path, f"line {line}, {joints[j]}: not a number ({row[c]!r})") from None
-            require(math.isfinite(value), path, f"line {line}, {joints[j]}: non-finite number {value}")
-            values[i, j] = value
+    values = np.frombuffer(flat, dtype=np.float64).reshape(-1, len(JOINT_NAMES)).copy()
     require(values.shape[0] >= 1, path, "no rows under the header")
     values = values[:, order]
     check_values(values, path)
     return values
+
+
+def _bounded_lines(f: Any, path: Path) -> Iterator[str]:
+    """The lines of text file ``f``, each at most :data:`MAX_CSV_LINE_CHARS` long (a longer one,
+    a million fields on one line, is refused before it is held)."""
+    while line := f.readline(MAX_CSV_LINE_CHARS + 1):
+        require(len(line) <= MAX_CSV_LINE_CHARS, path, f"a line longer than {MAX_CSV_LINE_CHARS} characters")
+        yield line
 
 
 def _joints_by_name(value: Any, path: Path, key: str) -> npt.NDArray[np.float64]:
@@ -208,10 +237,7 @@ def _joints_by_name(value: Any, path: Path, key: str) -> npt.NDArray[np.float64]
         order = joint_order(list(value), key)
     except ValueError as exc:
         raise InspectorError(path, str(exc)) from None
-    raw = list(value.values())
-    for name, v in value.items():
-        require(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v), path,
-                f"{key}.{name}: expected a finite number, found {v!r}")
+    raw = [finite_number(v, path, f"{key}.{name}") for name, v in value.items()]
     return np.asarray(raw, dtype=np.float64)[order]
 
 
@@ -239,12 +265,18 @@ def _png_frames(path: Path) -> dict[str, list[Path]]:
     return out
 
 
-def _frames_per_chunk(meta: dict[str, Any], path: Path, n_chunks: int, n_frames: int, video: Path | None) -> int:
+def _frame_rule(meta: dict[str, Any], path: Path) -> tuple[bool, bool]:
+    """(the first chunk keeps its conditioning frame, the later chunks drop theirs), from metadata.json."""
     keeps_first = meta.get("frame_zero_includes_conditioning_image", True)
     drops_later = meta.get("subsequent_chunks_drop_conditioning_frame", True)
     for key, value in (("frame_zero_includes_conditioning_image", keeps_first),
                        ("subsequent_chunks_drop_conditioning_frame", drops_later)):
-        require(isinstance(value, bool), path / METADATA, f"{key}: expected true or false, found {value!r}")
+        require(isinstance(value, bool), path / METADATA, f"{key}: expected true or false, found {shown(value)}")
+    return keeps_first, drops_later
+
+
+def _frames_per_chunk(meta: dict[str, Any], path: Path, n_chunks: int, n_frames: int, video: Path | None) -> int:
+    keeps_first, drops_later = _frame_rule(meta, path)
     per_chunk = FRAMES_PER_DECODED_CHUNK - (1 if drops_later else 0)
     expected = per_chunk * n_chunks + (1 if drops_later and keeps_first else 0)
     if "decoded_frame_count" in meta:
@@ -274,8 +306,8 @@ def _gt_link(path: Path, given: GtLink | None, given_start: int | None = None) -
         link.episode = _index(data, "episode", sidecar, None)
         link.start_frame = _index(data, "start_frame", sidecar, 0)
         fps = data.get("fps")
-        require(fps is None or (isinstance(fps, (int, float)) and not isinstance(fps, bool) and fps > 0
-                                and math.isfinite(fps)), sidecar, f"fps: expected a number > 0, found {fps!r}")
+        problem = None if fps is None else fps_problem(fps)
+        require(problem is None, sidecar, f"fps: {problem}")
         link.fps = fps
     if given is not None:
         link.dataset = given.dataset if given.dataset is not None else link.dataset
@@ -287,16 +319,11 @@ def _gt_link(path: Path, given: GtLink | None, given_start: int | None = None) -
 
 def _index(data: dict[str, Any], key: str, path: Path, default: Any) -> Any:
     value = data.get(key, default)
-    require(value is default or (isinstance(value, int) and not isinstance(value, bool) and value >= 0),
-            path, f"{key}: expected a non-negative integer, found {value!r}")
-    return value
+    return value if value is default else whole_number(value, path, key)
 
 
-def _positive_int(meta: dict[str, Any], key: str, path: Path, default: Any) -> Any:
-    value = meta.get(key, default)
-    require(isinstance(value, int) and not isinstance(value, bool) and value >= 1, path,
-            f"{key}: expected a positive integer, found {value!r}")
-    return value
+def _positive_int(meta: dict[str, Any], key: str, path: Path, default: Any, maximum: int = MAX_WHOLE) -> Any:
+    return whole_number(meta.get(key, default), path, key, minimum=1, maximum=maximum)
 
 
 # ----------------------------------------------------------------------------------------------

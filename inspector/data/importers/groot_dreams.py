@@ -44,17 +44,20 @@ import numpy as np
 import numpy.typing as npt
 
 from ...errors import InspectorError, require
+from ...schema import shown, whole_number
 from ...units import DEFAULT_LIMIT_MARGIN_DEG, JOINT_NAMES, Units, limit_margin_in_units, limits_in_units
 from ..ground_truth import GroundTruth
 from ..lerobot_dataset import (
     DEFAULT_CHUNKS_SIZE,
     V21_DEFAULT_DATA_PATH,
     V21_DEFAULT_VIDEO_PATH,
+    V21_TEMPLATE_FIELDS,
     EpisodeInfo,
     VideoSegment,
     read_jsonl,
+    template_problem,
 )
-from ..session import ABSURD_VALUE, ArrayValue, Rollout, Session, SessionWriter, check_apart, read_json_object
+from ..session import ABSURD_VALUE, ArrayValue, Rollout, Session, SessionWriter, check_apart, json_too_large, read_json_object
 from ..video import VideoClip, probe
 from .calibration import WRONG_CALIBRATION_SHARE, Calibration, parse_calibration
 
@@ -77,6 +80,9 @@ IMAGE_PREFIX = "observation.images."
 CODEBASE_VERSION_KEY = "codebase_version"
 # Relative difference between two frame rates that counts as a disagreement.
 FPS_TOLERANCE = 0.01
+# The widest action row a dump may slice a joint from (so100's rows are 44 wide; GR00T's
+# embodiments stay in the hundreds): a column past it is no column of any row.
+MAX_ACTION_COLUMN = 4095
 # Decoded frames may differ from an episode's length by this much before it is said (encoders
 # sometimes drop or repeat the last frame).
 FRAME_COUNT_SLACK = 1
@@ -89,6 +95,8 @@ def is_groot_dreams(path: str | Path) -> bool:
     if not ((meta / "modality.json").is_file() and (meta / "episodes.jsonl").is_file()
             and (meta / "info.json").is_file()):
         return False
+    if json_too_large(meta / "info.json"):
+        return True  # ours by its layout: the reader refuses its size
     try:
         info = json.loads((meta / "info.json").read_text())
     except (OSError, ValueError, RecursionError):
@@ -195,16 +203,14 @@ class NeuralTrajectories:
         return float(value)
 
     def _info_int(self, key: str, default: int) -> int:
-        value = self.info.get(key, default)
-        require(isinstance(value, int) and not isinstance(value, bool) and value > 0, self.root / INFO_PATH,
-                f"{key}: expected a positive integer, found {value!r}")
-        return int(value)
+        return whole_number(self.info.get(key, default), self.root / INFO_PATH, key, minimum=1)
 
     def _info_template(self, key: str, default: str) -> str:
         value = self.info.get(key) or default
-        require(isinstance(value, str), self.root / INFO_PATH, f"{key}: expected a path template, found {value!r}")
-        require(".." not in Path(value).parts and not Path(value).is_absolute(), self.root / INFO_PATH,
-                f"{key}: template {value!r} leaves the dataset")
+        require(isinstance(value, str), self.root / INFO_PATH, f"{key}: expected a path template, found {shown(value)}")
+        fields = {**V21_TEMPLATE_FIELDS, **({"video_key": "webcam"} if key == "video_path" else {})}
+        problem = template_problem(value, fields)
+        require(problem is None, self.root / INFO_PATH, f"{key}: {problem}")
         return value
 
     def _action_slicing(self) -> tuple[npt.NDArray[np.int64], bool]:
@@ -220,11 +226,13 @@ class NeuralTrajectories:
             joint = str(name).removeprefix(JOINT_PREFIX)
             if joint not in JOINT_NAMES:
                 continue  # another part (none in so100): not drawn
-            ok = (isinstance(where, dict) and all(isinstance(where.get(k), int) and not isinstance(where.get(k), bool)
-                                                  for k in ("start", "end")))
-            require(ok and where["start"] >= 0 and where["end"] == where["start"] + 1, f,
-                    f"action.{name}: expected {{\"start\": i, \"end\": i + 1}} (one column), found {where!r}")
-            columns[joint] = int(where["start"])
+            require(isinstance(where, dict), f, f"action.{name}: expected {{\"start\": i, \"end\": i + 1}} "
+                                                f"(one column), found {shown(where)}")
+            start = whole_number(where.get("start"), f, f"action.{name}.start", maximum=MAX_ACTION_COLUMN)
+            end = whole_number(where.get("end"), f, f"action.{name}.end", maximum=MAX_ACTION_COLUMN + 1)
+            require(end == start + 1, f, f"action.{name}: expected {{\"start\": i, \"end\": i + 1}} (one column), "
+                                         f"found {shown(where)}")
+            columns[joint] = start
             absolute = absolute and where.get("absolute", True) is not False
         missing = [f"{JOINT_PREFIX}{j}" for j in JOINT_NAMES if j not in columns]
         require(not missing, f, f"action: no slice for {missing}; found {sorted(parts)}")
@@ -251,8 +259,8 @@ class NeuralTrajectories:
             index: Any = row.get("task_index")
             task: Any = row.get("task")
             require(isinstance(index, int) and not isinstance(index, bool) and isinstance(task, str), f,
-                    f"line {line_no}: expected an integer 'task_index' and a string 'task', found {row!r}")
-            out[int(index)] = task
+                    f"line {line_no}: expected an integer 'task_index' and a string 'task', found {shown(row)}")
+            out[whole_number(index, f, f"line {line_no}: task_index")] = task
         return out
 
     @cached_property
@@ -264,10 +272,8 @@ class NeuralTrajectories:
             index: Any = row.get("episode_index")
             length: Any = row.get("length")
             tasks: Any = row.get("tasks", [])
-            require(isinstance(index, int) and not isinstance(index, bool) and index >= 0, f,
-                    f"line {line_no}: episode_index: expected an integer >= 0, found {index!r}")
-            require(isinstance(length, int) and not isinstance(length, bool) and length >= 1, f,
-                    f"line {line_no}: length: expected an integer >= 1, found {length!r}")
+            index = whole_number(index, f, f"line {line_no}: episode_index")
+            length = whole_number(length, f, f"line {line_no}: length", minimum=1)
             require(isinstance(tasks, list) and all(isinstance(t, str) for t in tasks), f,
                     f"line {line_no}: tasks: expected a list of strings, found {tasks!r}")
             require(index not in out, f, f"line {line_no}: episode_index {index} listed twice")
@@ -318,7 +324,7 @@ class NeuralTrajectories:
         try:
             mean = np.asarray(read_json_object(self.root / STATS_PATH)[ACTION_KEY]["mean"], dtype=np.float64)
             return mean[self.action_columns]
-        except (InspectorError, KeyError, TypeError, ValueError, IndexError):
+        except (InspectorError, KeyError, TypeError, ValueError, IndexError, OverflowError):  # 10**400
             return None
 
     # --- the frame rate ---------------------------------------------------------------------------

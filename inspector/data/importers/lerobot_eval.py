@@ -24,8 +24,10 @@ recording have no joints: they are listed as errors saying so.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
+import os
 import tempfile
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -36,9 +38,10 @@ import numpy as np
 import numpy.typing as npt
 
 from ...errors import InspectorError, require
+from ...schema import number_problem, shown, whole_number
 from ...units import Units
 from ..lerobot_dataset import INFO_PATH, LeRobotDataset
-from ..session import SessionWriter, check_apart
+from ..session import SessionWriter, check_apart, check_json_size
 from ..video import VideoClip, encode_h264
 from .dreamzero_so101 import tag_from_name
 
@@ -50,6 +53,11 @@ RECORDINGS_DIR = "recordings"
 RENDER_VIEW = "render"  # the simulator's rendered video (videos/<task>/eval_episode_N.mp4)
 PREDICTED_VIEW = "predicted"
 METRIC_LISTS = ("sum_rewards", "max_rewards", "successes")
+# Episodes of a task that the output directory holds nothing of (no video, no recording), and so
+# nothing to show of, listed one by one (each an error saying so); past these, one error of the
+# task counts the rest. eval_info.json can list any number of episodes: a million such rows would
+# be gigabytes of objects and a minute of look-ups for nothing.
+MAX_UNHELD_LISTED = 100
 # The two arms of an evaluated episode, in the words the app, report and export use.
 ARM_LABELS = {"pred": "commanded (action)", "gt": "executed (state)", "drift": "tracking error"}
 
@@ -94,9 +102,21 @@ def is_eval_output(path: Path) -> bool:
 # Reading eval_info.json and locating each episode's files
 
 
-def read_eval(root: Path) -> tuple[list[EvalEpisode], dict[str, InspectorError]]:
-    """Every episode ``eval_info.json`` lists, with its files; a task whose entry or recording is
-    broken is an error of its own (keyed by the task) and the others stay.
+@dataclass
+class EvalTask:
+    """What ``eval_info.json`` says of one task, counted over every episode it lists (also those
+    not materialised as :class:`EvalEpisode`: see :data:`MAX_UNHELD_LISTED`)."""
+
+    task: str
+    episodes: int
+    successes: int
+
+
+def read_eval(root: Path) -> tuple[list[EvalEpisode], dict[str, InspectorError], list[EvalTask]]:
+    """Every episode ``eval_info.json`` lists that the directory holds a file of (a video, a
+    recording), and the first :data:`MAX_UNHELD_LISTED` of each task that it holds nothing of;
+    the others of those are one error per task saying how many. A task whose entry or recording
+    is broken is an error of its own (keyed by the task) and the others stay.
 
     Raises:
         InspectorError: ``eval_info.json`` itself is unreadable or has no ``per_task`` list.
@@ -108,20 +128,32 @@ def read_eval(root: Path) -> tuple[list[EvalEpisode], dict[str, InspectorError]]
         raise InspectorError(info_file, f"per_task: expected a list of tasks, found {type(per_task).__name__}")
     episodes: list[EvalEpisode] = []
     errors: dict[str, InspectorError] = {}
+    tasks: list[EvalTask] = []
     for i, entry in enumerate(per_task):
         where = f"per_task[{i}]"
         try:
-            episodes += _task_episodes(root, entry, where)
+            held, task, unlisted = _task_episodes(root, entry, where)
         except InspectorError as exc:
             name = (f"{entry.get('task_group')}_{entry.get('task_id')}" if isinstance(entry, dict) else where)
             errors[tag_from_name(name)] = exc
-    return episodes, errors
+            continue
+        episodes += held
+        tasks.append(task)
+        if unlisted:
+            first, count = unlisted
+            errors[tag_from_name(f"{task.task}_ep{first:03d}_and_later")] = InspectorError(
+                Path(RECORDINGS_DIR) / task.task,
+                f"{count:,} more episodes from episode {first} on ({EVAL_INFO} {where} lists {task.episodes:,}): "
+                "neither a recording nor a video of them, so nothing to show; not listed one by one "
+                "(lerobot-eval records them with --eval.recording=true)")
+    return episodes, errors, tasks
 
 
 def _read_eval_info(path: Path) -> dict[str, Any]:
     """``eval_info.json`` as lerobot-eval writes it: Python's JSON, where an average over no
     episodes is ``NaN`` (in per_group / overall, which are not read); the fields read are checked
     where they are used."""
+    check_json_size(path)
     try:
         info = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError) as exc:
@@ -132,23 +164,28 @@ def _read_eval_info(path: Path) -> dict[str, Any]:
     return info
 
 
-def _task_episodes(root: Path, entry: Any, where: str) -> list[EvalEpisode]:
+def _task_episodes(root: Path, entry: Any, where: str
+                   ) -> tuple[list[EvalEpisode], EvalTask, tuple[int, int] | None]:
+    """The task's episodes that the directory holds a file of, and the first
+    :data:`MAX_UNHELD_LISTED` of those it holds nothing of; its counts; and (first, how many) of
+    the episodes held nothing of and not listed, or None. What the directory holds is read once
+    per task (a listing of ``videos/<task>/``, the recordings' episode indexes), not per episode."""
     info_file = root / EVAL_INFO
-    require(isinstance(entry, dict), info_file, f"{where}: expected an object, found {entry!r}")
+    require(isinstance(entry, dict), info_file, f"{where}: expected an object, found {shown(entry)}")
     group, task_id, metrics = entry.get("task_group"), entry.get("task_id"), entry.get("metrics")
-    require(isinstance(group, str) and group != "", info_file, f"{where}.task_group: expected a name, found {group!r}")
-    require(isinstance(task_id, int) and not isinstance(task_id, bool), info_file,
-            f"{where}.task_id: expected an integer, found {task_id!r}")
-    require(isinstance(metrics, dict), info_file, f"{where}.metrics: expected an object, found {metrics!r}")
+    require(isinstance(group, str) and group != "", info_file, f"{where}.task_group: expected a name, found {shown(group)}")
+    task_id = whole_number(task_id, info_file, f"{where}.task_id")
+    require(isinstance(metrics, dict), info_file, f"{where}.metrics: expected an object, found {shown(metrics)}")
     lists = {}
     for key in METRIC_LISTS:
         values = metrics.get(key, [])
-        require(isinstance(values, list), info_file, f"{where}.metrics.{key}: expected a list, found {values!r}")
-        for j, v in enumerate(values):
-            ok = isinstance(v, bool) if key == "successes" else (
-                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v))
-            require(ok, info_file, f"{where}.metrics.{key}[{j}]: expected "
-                                   f"{'true or false' if key == 'successes' else 'a finite number'}, found {v!r}")
+        require(isinstance(values, list), info_file, f"{where}.metrics.{key}: expected a list, found {shown(values)}")
+        fine = (all(v is True or v is False for v in values) if key == "successes"
+                else all(type(v) is float and math.isfinite(v) for v in values))  # the usual case, fast
+        for j, v in enumerate([] if fine else values):
+            problem = (None if isinstance(v, bool) else f"expected true or false, found {shown(v)}") \
+                if key == "successes" else number_problem(v)
+            require(problem is None, info_file, f"{where}.metrics.{key}[{j}]: {problem}")
         lists[key] = values
     n = max(len(v) for v in lists.values())
     require(n > 0, info_file, f"{where}.metrics: no episodes (sum_rewards, max_rewards and successes are empty)")
@@ -156,20 +193,43 @@ def _task_episodes(root: Path, entry: Any, where: str) -> list[EvalEpisode]:
     videos = {key: _paths(metrics.get(key, []), info_file, f"{where}.metrics.{key}")
               for key in ("video_paths", "predicted_video_paths")}
     recordings = _recordings(root / RECORDINGS_DIR / task)
+    recorded = [ds.episode_indexes() for ds in recordings]
+    video_dir = root / VIDEOS_DIR / task
+    try:
+        in_video_dir = set(os.listdir(video_dir)) if video_dir.is_dir() else set()
+    except OSError:
+        in_video_dir = set()
+    # The episodes the directory may hold a file of, from what it holds (not one look-up per listed episode).
+    held = {i * len(recordings) + env for env, indexes in enumerate(recorded) for i in indexes}
+    for name in in_video_dir:
+        stem, _, number = name.removesuffix(".mp4").rpartition("_")
+        if stem in ("eval_episode", "pred_episode") and number.isdigit() and name.endswith(".mp4"):
+            held.add(int(number))
+    for key in ("video_paths", "predicted_video_paths"):
+        held.update(k for k, p in enumerate(videos[key][:n])
+                    if os.path.basename(p) in in_video_dir or os.path.isfile(p))
+    held = {k for k in held if k < n}
+    unheld = n - len(held)
+    shown_unheld = list(itertools.islice((k for k in range(n) if k not in held), MAX_UNHELD_LISTED))
     out = []
-    for k in range(n):
+    for k in sorted(held.union(shown_unheld)):
+        env = k % len(recordings) if recordings else 0  # batched envs: episode k ran in env k % n_envs
+        index = k // len(recordings) if recordings else k
         ep = EvalEpisode(task, group, task_id, k,
                          success=_at(lists["successes"], k), sum_reward=_at(lists["sum_rewards"], k),
-                         max_reward=_at(lists["max_rewards"], k))
-        ep.render = _video(root, task, videos["video_paths"], k, "eval_episode")
-        ep.predicted = _video(root, task, videos["predicted_video_paths"], k, "pred_episode")
-        if recordings:
-            ds = recordings[k % len(recordings)]  # batched envs: episode k ran in env k % n_envs
-            index = k // len(recordings)
-            if index in ds.episode_indexes():
-                ep.recording = (ds, index)
+                         max_reward=_at(lists["max_rewards"], k),
+                         render=_video(root, task, videos["video_paths"], k, "eval_episode", in_video_dir),
+                         predicted=_video(root, task, videos["predicted_video_paths"], k, "pred_episode",
+                                          in_video_dir))
+        if recordings and index in recorded[env]:
+            ep.recording = (recordings[env], index)
         out.append(ep)
-    return out
+    successes = sum(v is True for v in lists["successes"][:n])
+    unlisted = None
+    if unheld > MAX_UNHELD_LISTED:
+        first = next(k for k in range(shown_unheld[-1] + 1, n) if k not in held)
+        unlisted = (first, unheld - MAX_UNHELD_LISTED)
+    return out, EvalTask(task, n, successes), unlisted
 
 
 def _at(values: list, k: int) -> Any:
@@ -182,15 +242,20 @@ def _paths(value: Any, file: Path, where: str) -> list[str]:
     return value
 
 
-def _video(root: Path, task: str, listed: list[str], k: int, stem: str) -> Path | None:
+def _video(root: Path, task: str, listed: list[str], k: int, stem: str, in_video_dir: set[str]) -> Path | None:
     """Episode ``k``'s video: the path eval_info.json lists (as written, or moved with the output
-    directory: under ``videos/<task>/``), else the name lerobot-eval gives it."""
-    candidates = []
+    directory: under ``videos/<task>/``), else the name lerobot-eval gives it. ``in_video_dir``:
+    the names in ``videos/<task>/``, so that a name not there costs no look-up on disk (this runs
+    for every episode eval_info.json lists: strings, not paths, until one is found)."""
+    video_dir = root / VIDEOS_DIR / task
     if k < len(listed):
-        p = Path(listed[k])
-        candidates += [p, root / VIDEOS_DIR / task / p.name]
-    candidates.append(root / VIDEOS_DIR / task / f"{stem}_{k}.mp4")
-    return next((c for c in candidates if c.is_file()), None)
+        if os.path.isfile(listed[k]):
+            return Path(listed[k])
+        name = os.path.basename(listed[k])
+        if name in in_video_dir and (video_dir / name).is_file():
+            return video_dir / name
+    name = f"{stem}_{k}.mp4"
+    return video_dir / name if name in in_video_dir and (video_dir / name).is_file() else None
 
 
 def _recordings(task_dir: Path) -> list[LeRobotDataset]:
@@ -289,7 +354,7 @@ def import_eval(src: str | Path, dest: str | Path, *, overwrite: bool = False, k
     if not is_eval_output(src):
         raise InspectorError(src, f"no {EVAL_INFO}: not a lerobot-eval output directory")
     check_apart(dest, src)
-    episodes, errors = read_eval(src)
+    episodes, errors, _ = read_eval(src)
     if errors and not keep_going:
         raise next(iter(errors.values()))
     units = _session_units(episodes)
@@ -331,14 +396,12 @@ def load_in_memory(src: str | Path, dataset: str | Path | None = None
 
 def describe(src: Path) -> dict[str, Any]:
     """What ``inspector info`` says about an output directory (nothing decoded)."""
-    episodes, errors = read_eval(src)
-    tasks: dict[str, dict[str, Any]] = {}
+    episodes, errors, listed = read_eval(src)
+    tasks: dict[str, dict[str, Any]] = {t.task: {"task": t.task, "episodes": t.episodes, "successes": t.successes,
+                                                 "recorded": 0} for t in listed}
     rows = []
     for ep in episodes:
-        t = tasks.setdefault(ep.task, {"task": ep.task, "episodes": 0, "successes": 0, "recorded": 0})
-        t["episodes"] += 1
-        t["successes"] += bool(ep.success)
-        t["recorded"] += ep.recording is not None
+        tasks[ep.task]["recorded"] += ep.recording is not None
         fps = ep.recording[0].fps if ep.recording else None
         cams = list(ep.recording[0].cameras) if ep.recording else []
         rows.append({"tag": ep.tag, "task": ep.task, "episode": ep.index, "success": ep.success,
@@ -349,7 +412,7 @@ def describe(src: Path) -> dict[str, Any]:
     for t in tasks.values():
         t["success_rate"] = t["successes"] / t["episodes"]
     warnings = []
-    unrecorded = sum(r["length"] is None for r in rows)
+    unrecorded = sum(t["episodes"] - t["recorded"] for t in tasks.values())
     if unrecorded:
         warnings.append(f"{unrecorded} episode(s) without a recording: no joints to show "
                         "(lerobot-eval records them with --eval.recording=true)")
