@@ -215,10 +215,12 @@ def _guarded(task, fn, with_missing: bool = False):
 
 
 def _init_background_worker() -> None:
-    """The computing worker: a report worker at a lower CPU priority, which Ctrl-C leaves alone
-    (the app stops it; at a terminal, Ctrl-C reaches every process of the group)."""
+    """The computing worker: a report worker at the computing thread's lower CPU priority, which
+    Ctrl-C leaves alone (the app stops it; at a terminal, Ctrl-C reaches every process of the
+    group). Started by that thread, the worker has its niceness already on Linux: it is not added
+    twice (nice 19, all but stopped on busy cores)."""
     try:
-        os.nice(BACKGROUND_NICENESS)
+        os.nice(max(0, BACKGROUND_NICENESS - os.nice(0)))
     except (AttributeError, OSError):
         pass
     _init_worker()
