@@ -29,6 +29,7 @@ import pytest
 from inspector.app import HeadlessClient, serve
 from inspector.data.session import SessionWriter
 from inspector.data.sources import BUNDLED_DEMO
+from inspector.jobs.pool import spawn_pool, stop_pool
 
 pytestmark = pytest.mark.slow
 
@@ -244,6 +245,142 @@ def test_stopping_an_app_in_this_process_ends_its_worker(long_session, tmp_path)
         app.stop()
     descendants.stop_recording()
     left = descendants.alive()  # stop() returns once its worker has ended: no waiting here
+    assert not left, f"running after stop() returned: {left}"
+
+
+# ----------------------------------------------------------------------------------------------
+# Stopping a pool while a worker is exiting, starting, or being let go
+
+
+STOP_ROUNDS = 5  # pools stopped in a row: a worker caught exiting in one of them fails the test
+
+
+def _spin(seconds: float) -> float:
+    """A job that keeps its worker busy."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        pass
+    return seconds
+
+
+def _no_outcomes(task) -> list:
+    """The overview's job, computing nothing."""
+    return []
+
+
+def has_exited(pid: int) -> bool:
+    """The process is gone, or a zombie (only its exit status is left to collect)."""
+    try:
+        return psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return True
+
+
+@contextmanager
+def busy_cores() -> Iterator[None]:
+    """Every core busy meanwhile, as on the shared machine where a worker was seen exiting after
+    its pool had been stopped."""
+    spinners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(os.cpu_count() or 1)]
+    try:
+        yield
+    finally:
+        for p in spinners:
+            p.kill()
+        for p in spinners:
+            p.wait()
+
+
+def test_stop_pool_returns_once_its_workers_have_exited():
+    """A killed worker's pipes close as it starts exiting, before it has exited: stop_pool waits
+    for the exit itself. A worker at the lowest priority on busy cores stays long between the two."""
+    caught: list[int] = []
+    with busy_cores():
+        for _ in range(STOP_ROUNDS):
+            pool = spawn_pool(2)
+            futures = [pool.submit(_spin, 60.0) for _ in range(2)]
+            workers = list(pool._processes.values())
+            for w in workers:
+                psutil.Process(w.pid).nice(19)
+            try:
+                stop_pool(pool, grace_s=0)
+                caught += [w.pid for w in workers if not has_exited(w.pid)]
+            finally:
+                for w in workers:
+                    w.kill()
+                    w.join()
+            assert all(f.done() for f in futures)
+    assert not caught, f"running after stop_pool returned: {caught}"
+
+
+def test_stop_pool_ends_a_worker_that_a_submit_is_starting():
+    """stop_pool while another thread's submit is starting the pool's first worker: that worker
+    ends too (it used to be missed, and ran the job)."""
+    pool = spawn_pool(1)
+    started = pool._processes  # the pool's own mapping, filled as it starts workers
+    spawning = threading.Event()
+    spawn = pool._spawn_process
+
+    def slow_spawn() -> None:
+        spawning.set()
+        time.sleep(1.0)  # stop_pool is called meanwhile
+        spawn()
+
+    pool._spawn_process = slow_spawn  # type: ignore[method-assign]
+    submitter = threading.Thread(target=lambda: pool.submit(_spin, 60.0))
+    submitter.start()
+    try:
+        assert spawning.wait(60)
+        stop_pool(pool, grace_s=0)
+        left = [w.pid for w in list(started.values()) if not has_exited(w.pid)]
+    finally:
+        submitter.join(60)
+        for w in list(started.values()):
+            w.kill()
+            w.join()
+    assert started, "no worker was started: nothing was tested"
+    assert not left, f"running after stop_pool returned: {left}"
+
+
+def test_stopping_the_overview_as_it_lets_its_worker_go_waits_for_that_worker(monkeypatch):
+    """OverviewRows.stop() while the computing thread, every row done, is shutting its pool down:
+    stop() returns once the worker has ended (it used to find no pool and return at once)."""
+    import inspector.app._overview_rows as overview_rows
+    from inspector.app._catalog import Catalog
+    from inspector.cache import MetricsCache
+    from inspector.data.sources import open_sources
+
+    letting_go, go_on = threading.Event(), threading.Event()
+    workers: list = []
+
+    def spawn(*args, **kwargs):
+        pool = spawn_pool(*args, **kwargs)
+        workers.append(pool._processes)  # the pool's own mapping, filled as it starts workers
+        shutdown = pool.shutdown
+
+        def slow_shutdown(wait: bool = True, **kw) -> None:
+            if wait:  # the computing thread letting the pool go (stop_pool does not wait)
+                letting_go.set()
+                go_on.wait(60)
+            shutdown(wait=wait, **kw)
+
+        pool.shutdown = slow_shutdown
+        return pool
+
+    monkeypatch.setattr(overview_rows, "spawn_pool", spawn)
+    monkeypatch.setattr(overview_rows, "run_task", _no_outcomes)
+    catalog = Catalog(open_sources([BUNDLED_DEMO], confine=True, datasets=True), None, {},
+                      metrics_cache=MetricsCache(enabled=False))
+    rows = overview_rows.OverviewRows(catalog)
+    rows.start()
+    try:
+        assert letting_go.wait(START_TIMEOUT_S), "the overview computed no row in a worker"
+        rows.stop()
+        pids = [w.pid for mapping in workers for w in list(mapping.values())]
+        left = [pid for pid in pids if not has_exited(pid)]
+    finally:
+        go_on.set()
+        assert rows.done.wait(60)
+    assert pids, "no worker was started: nothing was tested"
     assert not left, f"running after stop() returned: {left}"
 
 

@@ -129,19 +129,22 @@ class OverviewRows(Notifying):
 
     # -- computing ------------------------------------------------------------------------------
     def start(self) -> None:
-        """Start computing (once; later calls do nothing)."""
+        """Start computing (once; later calls, and calls once stopped, do nothing)."""
         with self._lock:
-            if self._thread is not None or self.done.is_set():
+            if self._thread is not None or self.done.is_set() or self._stop.is_set():
                 return
             self._thread = threading.Thread(target=self._run, name="inspector-overview-rows", daemon=True)
         self._thread.start()
 
     def stop(self) -> None:
         """Stop computing; returns once the worker process has ended (the task under way is
-        dropped with its rows: the app is going)."""
+        dropped with its rows: the app is going). No worker starts afterwards: the pool is made
+        under the lock, after a last look at the stop flag, and a worker that its first job is
+        starting as this runs is waited for (:func:`~inspector.jobs.pool.stop_pool`), as is one
+        that the computing thread is letting go after the last row."""
         with self._lock:
             self._stop.set()
-            pool, self._pool = self._pool, None
+            pool = self._pool  # the computing thread forgets it once its workers have ended
         if pool is not None:
             stop_pool(pool, grace_s=0)  # no grace: a killed cache write never leaves an entry
 
@@ -174,10 +177,10 @@ class OverviewRows(Notifying):
                         self._publish(outcomes)
                         self._notify()
                 finally:
+                    # Forgotten only once its worker has ended: stop() meanwhile waits for it too.
+                    pool.shutdown(wait=True)
                     with self._lock:
-                        mine, self._pool = self._pool, None
-                    if mine is not None:
-                        mine.shutdown(wait=True)
+                        self._pool = None
         finally:
             self.done.set()
             self._notify()
@@ -212,10 +215,12 @@ def _guarded(task, fn, with_missing: bool = False):
 
 
 def _init_background_worker() -> None:
-    """The computing worker: a report worker at a lower CPU priority, which Ctrl-C leaves alone
-    (the app stops it; at a terminal, Ctrl-C reaches every process of the group)."""
+    """The computing worker: a report worker at the computing thread's lower CPU priority, which
+    Ctrl-C leaves alone (the app stops it; at a terminal, Ctrl-C reaches every process of the
+    group). Started by that thread, the worker has its niceness already on Linux: it is not added
+    twice (nice 19, all but stopped on busy cores)."""
     try:
-        os.nice(BACKGROUND_NICENESS)
+        os.nice(max(0, BACKGROUND_NICENESS - os.nice(0)))
     except (AttributeError, OSError):
         pass
     _init_worker()

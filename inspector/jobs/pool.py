@@ -34,6 +34,8 @@ R = TypeVar("R")
 STOP_GRACE_S = 5.0
 # How long killed workers get to be gone before stop_pool returns anyway [s].
 KILL_WAIT_S = 10.0
+# How often a worker whose pipes have closed is checked until it has exited [s].
+EXIT_POLL_S = 0.005
 # How often a worker checks that its parent is alive when the parent's pipe cannot tell (the
 # parent was replaced: another process inherited that pipe, or a subreaper adopted this one) [s].
 PARENT_CHECK_S = 1.0
@@ -56,12 +58,16 @@ def stop_pool(pool: ProcessPoolExecutor, grace_s: float = STOP_GRACE_S) -> None:
     jobs under way are interrupted (SIGINT: an :func:`interruptible` job stops as on Ctrl-C,
     cleaning up after itself), and a worker still running ``grace_s`` later is killed.
 
-    A worker that is not running a job ignores SIGINT and ends when the pool tells it to.
+    A worker being started meanwhile (a ``submit`` on another thread) is one of them: no worker
+    starts once this has begun. A worker that is not running a job ignores SIGINT and ends when
+    the pool tells it to.
     """
-    # The pool forgets its processes on shutdown: take them first (a copy, as the pool's
-    # manager thread changes the mapping).
-    processes = list(dict(getattr(pool, "_processes", None) or {}).values())
+    # The pool forgets its processes on shutdown: keep its mapping (the dict itself, which the
+    # pool fills as it starts workers). shutdown() waits for a submit that is starting a worker
+    # (both hold the pool's lock), and no worker starts after it: the mapping is then complete.
+    started = getattr(pool, "_processes", None)
     pool.shutdown(wait=False, cancel_futures=True)
+    processes = list(dict(started or {}).values())  # a copy: the pool's manager thread changes it
     if grace_s > 0:
         for process in processes:
             with suppress(ProcessLookupError, ValueError, AttributeError):  # already ended, or closed
@@ -75,9 +81,15 @@ def stop_pool(pool: ProcessPoolExecutor, grace_s: float = STOP_GRACE_S) -> None:
 
 
 def _wait_until_ended(processes: list, timeout: float) -> list:
-    """Wait up to ``timeout`` seconds until every process has ended; returns those still running."""
+    """Wait up to ``timeout`` seconds until every process has ended; returns those still running.
+
+    A process has ended once it has exited (the kernel keeps only its exit status), not when its
+    sentinel fires: that pipe closes as the exiting process drops its files, before it is done
+    exiting, and a killed worker at a low priority on a busy machine can stay a while between
+    the two, still running as far as anyone can see.
+    """
     deadline = time.monotonic() + timeout
-    running = list(processes)
+    running = [p for p in processes if not _has_exited(p)]
     while running:
         try:
             sentinels = {p.sentinel: p for p in running}
@@ -87,9 +99,33 @@ def _wait_until_ended(processes: list, timeout: float) -> list:
         left = deadline - time.monotonic()
         if left <= 0:
             break
-        ended = wait_for_sentinels(list(sentinels), left)
-        running = [p for s, p in sentinels.items() if s not in ended]
+        closed = wait_for_sentinels(list(sentinels), left)
+        # the pipe closed: exiting, soon exited (polled, as there is nothing else to wait on)
+        running = [p for s, p in sentinels.items() if s not in closed or not _has_exited(p)]
+        if running and closed:
+            time.sleep(min(EXIT_POLL_S, max(0.0, deadline - time.monotonic())))
     return running
+
+
+def _has_exited(process) -> bool:
+    """``process`` (a child of this process) has exited: reaped, here or by its pool's thread,
+    or a zombie."""
+    try:
+        if process.exitcode is not None:  # reaps it once exited, as join() does
+            return True
+        pid = process.pid
+    except ValueError:  # closed: it had ended
+        return True
+    if pid is None:  # never started
+        return True
+    if not hasattr(os, "waitid"):  # Windows: the sentinel is the process handle, signalled at exit
+        sentinel = _sentinel_or_none(process)
+        return sentinel is None or bool(wait_for_sentinels([sentinel], 0))
+    try:
+        # Looked at, not reaped (WNOWAIT): the pool's own thread joins its workers too.
+        return os.waitid(os.P_PID, pid, os.WEXITED | os.WNOHANG | os.WNOWAIT) is not None
+    except ChildProcessError:  # reaped meanwhile (by the pool's thread)
+        return True
 
 
 def _sentinel_or_none(process) -> int | None:
