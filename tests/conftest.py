@@ -15,8 +15,28 @@ from hypothesis import HealthCheck, settings
 settings.register_profile("shared-machine", suppress_health_check=[HealthCheck.too_slow], deadline=None)
 settings.load_profile("shared-machine")
 
-# The repo sits at <work>/main and the shared fixtures at <work>/shared/fixtures.
-FIXTURES_DIR = Path(__file__).resolve().parents[2] / "shared" / "fixtures"
+REPO = Path(__file__).resolve().parents[1]
+# What the repository owns: LeRobot-written datasets (tests/data/lerobot/README.md) and the demo.
+LEROBOT_DATA = REPO / "tests" / "data" / "lerobot"
+DEMO_SESSION = REPO / "sessions" / "demo"
+# The real DreamZero-SO101 outputs are not ours to redistribute: the folder holding
+# ``dreamzero_so101/`` is named by this variable (default: the shared fixtures beside the repo).
+FIXTURES_ENV = "INSPECTOR_FIXTURES"
+
+
+def real_fixtures_dir() -> Path:
+    """The folder that holds ``dreamzero_so101/`` (``$INSPECTOR_FIXTURES``, else ``<repo>/../shared/fixtures``)."""
+    value = os.environ.get(FIXTURES_ENV)
+    return Path(value).expanduser() if value else REPO.parent / "shared" / "fixtures"
+
+
+def real_outputs_skip_reason() -> str | None:
+    """Why the tests of the real DreamZero-SO101 outputs cannot run here (None: they can)."""
+    where = real_fixtures_dir() / "dreamzero_so101"
+    if where.is_dir():
+        return None
+    return (f"real DreamZero-SO101 outputs not found at {where}: set {FIXTURES_ENV} to the folder "
+            f"holding dreamzero_so101/")
 
 
 @pytest.fixture(autouse=True, scope="session")
@@ -78,27 +98,46 @@ def _adopt_orphans() -> bool:
 
 
 @pytest.fixture(scope="session")
-def fixtures_dir() -> Path:
-    """``../shared/fixtures``; tests using it are skipped when it is absent."""
-    if not FIXTURES_DIR.is_dir():
-        pytest.skip(f"shared fixtures not found at {FIXTURES_DIR}")
-    return FIXTURES_DIR
+def lerobot_dir() -> Path:
+    """``tests/data/lerobot``: the SO-101 datasets LeRobot's own writer made (v3.0 and v2.1)."""
+    return LEROBOT_DATA
 
 
 @pytest.fixture(scope="session")
-def dreamzero_dir(fixtures_dir: Path) -> Path:
-    """Real DreamZero-SO101 model outputs."""
-    return fixtures_dir / "dreamzero_so101"
+def dreamzero_dir() -> Path:
+    """Real DreamZero-SO101 model outputs (``$INSPECTOR_FIXTURES/dreamzero_so101``); tests using
+    them are skipped when absent."""
+    reason = real_outputs_skip_reason()
+    if reason is not None:
+        pytest.skip(reason)
+    return real_fixtures_dir() / "dreamzero_so101"
 
 
 @pytest.fixture(scope="session")
 def imported_session(dreamzero_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Every DreamZero-SO101 fixture imported once into a native session (read-only for tests)."""
+    """Every real DreamZero-SO101 output imported once into a native session (read-only for tests)."""
     from inspector.data.importers.dreamzero_so101 import import_dreamzero
 
     dest = tmp_path_factory.mktemp("imported") / "dz"
     import_dreamzero(dreamzero_dir, dest, log=lambda _: None)
     return dest
+
+
+@pytest.fixture(scope="session")
+def dz_layout(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A source directory in the DreamZero-SO101 layout made from the bundled demo, written once
+    (read-only for tests; ``dreamzero_layout.py`` says what it holds)."""
+    from dreamzero_layout import write_dreamzero_layout
+
+    return write_dreamzero_layout(tmp_path_factory.mktemp("dz-layout") / "dreamzero_so101")
+
+
+@pytest.fixture(scope="session")
+def dz_layout_session(dz_layout: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """``dz_layout`` imported once into a native session (read-only for tests)."""
+    from inspector.data.importers.dreamzero_so101 import import_dreamzero
+
+    return import_dreamzero(dz_layout, tmp_path_factory.mktemp("dz-layout-session") / "dz", log=lambda _: None)
 
 
 @pytest.fixture(autouse=True)

@@ -28,28 +28,59 @@ from inspector.app._playback_clip import CLIP_STEPS
 from inspector.app._state import ARMS_AFTER_FRAME_S
 from inspector.errors import InspectorError
 
+DEMO = Path(__file__).resolve().parents[1] / "sessions" / "demo"
+# The demo's rollouts the app tests use, by what they are for (``inspector info sessions/demo``).
+LONG = "overrun_60chunks"  # 60 chunks of 9 steps (540) on a 409-frame episode
+TRAIN, NOVEL = "prompt_train", "prompt_novel"  # a training/novel prompt pair, 49 chunks each
+LIMITS = "limits_wrist"  # wrist_flex driven past its limit
+SINGLE, OTHER_SINGLE = "single_f076", "single_f153"  # single chunks
+BROKEN = "single_f000"  # broken copy: truncated actions.npy
+CARRIED_GT = "single_f230"  # carries its own GT videos; broken copy: a truncated GT front video
+ROLLOUTS = (LONG, TRAIN, NOVEL, LIMITS, SINGLE, OTHER_SINGLE, BROKEN, CARRIED_GT)
+VIEWS = ("front", "wrist")
 
-def make_sessions(fixtures_dir: Path, root: Path) -> tuple[Path, Path]:
-    """Import the DreamZero fixtures into a session, and a copy with faults planted.
 
-    The copy's ``f000`` has a truncated ``actions.npy`` (the rollout fails to load) and its
-    ``ep000_novel`` a truncated GT front video (that view fails, the rest of the rollout works).
+def make_sessions(root: Path) -> tuple[Path, Path]:
+    """The bundled demo (its dataset, and the rollouts of ``ROLLOUTS``) copied into a session, and
+    a copy with faults planted.
+
+    ``CARRIED_GT`` carries its GT videos with it (its episode's frames, cut from the dataset), as
+    an evaluation that logged its GT would. The copy's ``BROKEN`` has a truncated ``actions.npy``
+    (the rollout fails to load) and its ``CARRIED_GT`` a truncated GT front video (that view fails,
+    the rest of the rollout works).
     """
-    from inspector.data.importers.dreamzero_so101 import import_dreamzero
+    from inspector.data.lerobot_dataset import open_dataset
+    from inspector.data.video import encode_h264
 
-    good = import_dreamzero(fixtures_dir / "dreamzero_so101", root / "fixture", log=lambda _: None)
+    good = root / "demo"
+    shutil.copytree(DEMO, good)
+    for rollout in (good / "rollouts").iterdir():
+        if rollout.name not in ROLLOUTS:
+            shutil.rmtree(rollout)
+    carried = good / "rollouts" / CARRIED_GT
+    meta = json.loads((carried / "rollout.json").read_text())
+    episode = open_dataset(good / "dataset").episode(meta["episode_index"])
+    for view in VIEWS:
+        frames = []
+        for _, rgb in episode.clip_from(view, meta["start_frame"]).iter_frames():
+            frames.append(rgb)
+            if len(frames) == meta["frames_per_chunk"]:
+                break
+        encode_h264(carried / "gt" / "video" / f"{view}.mp4", frames, meta["fps"])
+    meta["gt"]["views"] = list(VIEWS)
+    (carried / "rollout.json").write_text(json.dumps(meta, indent=2) + "\n")
     broken = root / "broken"
     shutil.copytree(good, broken)
-    actions = broken / "rollouts" / "f000" / "actions.npy"
+    actions = broken / "rollouts" / BROKEN / "actions.npy"
     actions.write_bytes(actions.read_bytes()[:200])
-    video = broken / "rollouts" / "ep000_novel" / "gt" / "video" / "front.mp4"
+    video = broken / "rollouts" / CARRIED_GT / "gt" / "video" / "front.mp4"
     video.write_bytes(video.read_bytes()[:3000])
     return good, broken
 
 
 @pytest.fixture(scope="module")
-def sessions(fixtures_dir, tmp_path_factory) -> tuple[Path, Path]:
-    return make_sessions(fixtures_dir, tmp_path_factory.mktemp("app"))
+def sessions(tmp_path_factory) -> tuple[Path, Path]:
+    return make_sessions(tmp_path_factory.mktemp("app"))
 
 
 @pytest.fixture(scope="module")
@@ -82,7 +113,7 @@ def key(app, tag: str) -> str:
 def test_tab_opens_and_scrubs(app):
     client, tab = connect(app)
     with client:
-        assert tab.open(key(app, "ep000_train"))
+        assert tab.open(key(app, LONG))
         tl = tab.loaded.timeline
         assert tl.n_steps == 540 and tab.step == 0
         assert tab.set_step(100) == 100
@@ -93,22 +124,22 @@ def test_tab_opens_and_scrubs(app):
         # The frames arrive in the background, then every view shows a pair.
         assert tab.loaded.frames.done.wait(60)
         tab.set_step(20, force=True)
-        assert {p.view for p in tab.pairs} == {"front", "gripper", "top"}
+        assert {p.view for p in tab.pairs} == set(VIEWS)
         assert all(p.status == READY and p.imagined and p.gt for p in tab.pairs)
         assert all(p.imagined_index == tl.frame_index(20) for p in tab.pairs)
         before = [p.imagined for p in tab.pairs]
         tab.set_step(200)
         assert [p.imagined for p in tab.pairs] != before
-        # Past the real episode's end (328 steps) there is no GT frame, and it says so.
-        tab.set_step(400)
+        # Past the real episode's end (409 steps) there is no GT frame, and it says so.
+        tab.set_step(450)
         assert all(p.gt is None and "end" in p.gt_note for p in tab.pairs)
-        assert tab.loaded.timeline.episode_end_step == 328
+        assert tab.loaded.timeline.episode_end_step == 409
 
 
 def test_worst_chunk_and_limits(app):
     client, tab = connect(app)
     with client:
-        assert tab.open(key(app, "ep000_train"))
+        assert tab.open(key(app, LIMITS))
         tl = tab.loaded.timeline
         assert tab.jump_to_worst_chunk() == tl.worst_chunk()[0] * tl.steps_per_chunk
         bad = int(np.flatnonzero(tl.limit_violation.any(axis=1))[0])
@@ -123,7 +154,7 @@ def test_a_light_3d_page_gets_a_steps_frames_before_its_arms(app):
     a GPU gets the whole step in one message."""
     client, tab = connect(app)
     with client:
-        assert tab.open(key(app, "ep000_train"))
+        assert tab.open(key(app, LONG))
         ee_pred = tab.scene.data.ee_pred
 
         def posed_at(step: int) -> bool:
@@ -150,20 +181,20 @@ def test_tabs_are_independent(app):
     c2, t2 = connect(app)
     with c1, c2:
         assert t1 is not t2 and t1.client_id != t2.client_id
-        assert t1.open(key(app, "ep000_train")) and t2.open(key(app, "ep000_train"))
+        assert t1.open(key(app, LONG)) and t2.open(key(app, LONG))
         t1.set_step(250)
         assert t2.step == 0 and t2.controls.chunk.value == 0
         assert t1.loaded.timeline is t2.loaded.timeline  # shared, built once
-        t2.open(key(app, "f084"))
-        assert t1.key == key(app, "ep000_train") and t1.step == 250
+        t2.open(key(app, SINGLE))
+        assert t1.key == key(app, LONG) and t1.step == 250
 
 
 def test_slider_move_from_client_moves_only_that_tab(app):
     c1, t1 = connect(app)
     c2, t2 = connect(app)
     with c1, c2:
-        t1.open(key(app, "ep000_train"))
-        t2.open(key(app, "ep000_train"))
+        t1.open(key(app, LONG))
+        t2.open(key(app, LONG))
         # What a browser sends when the user drags the chunk slider (uuid: viser's internal id).
         c1.set_gui_value(t1.controls.chunk._impl.uuid, 7)
         deadline = time.monotonic() + 10
@@ -176,27 +207,28 @@ def test_slider_move_from_client_moves_only_that_tab(app):
 def test_broken_rollout_shows_error_card_and_others_work(app):
     client, tab = connect(app)
     with client:
-        assert not tab.open(key(app, "f000"))
+        assert not tab.open(key(app, BROKEN))
         assert isinstance(tab.error, InspectorError)
         assert tab.controls.error.visible and "actions.npy" in tab.controls.error.content
         assert tab.loaded is None
         tab.set_step(5)  # harmless without a rollout
-        assert tab.open(key(app, "f084"))
+        assert tab.open(key(app, SINGLE))
         assert not tab.controls.error.visible and tab.error is None
 
 
 def test_broken_video_fails_alone(app):
     client, tab = connect(app)
     with client:
-        assert tab.open(key(app, "ep000_novel"))
+        assert tab.open(key(app, CARRIED_GT))
         frames = tab.loaded.frames
         assert frames.done.wait(60)
-        assert frames.status["front"] == READY and frames.status["top"] == READY
+        assert frames.status["front"] == READY and frames.status["wrist"] == READY
         assert frames.gt_status["front"] != READY and "front.mp4" in frames.gt_status["front"]
+        assert frames.gt_status["wrist"] == READY
         tab.set_step(3, force=True)
         by_view = {p.view: p for p in tab.pairs}
         assert by_view["front"].imagined and by_view["front"].gt is None
-        assert by_view["top"].imagined and by_view["top"].gt
+        assert by_view["wrist"].imagined and by_view["wrist"].gt
         assert "front.mp4" in tab.video.html.content
 
 
@@ -209,11 +241,11 @@ def test_timeline_failure_shows_error_card(app, monkeypatch):
     monkeypatch.setattr(catalog_module, "build_timeline", explode)
     client, tab = connect(app)
     with client:
-        assert not tab.open(key(app, "f169"))
+        assert not tab.open(key(app, OTHER_SINGLE))
         assert "metrics blew up" in tab.controls.error.content
-        assert "f169" in tab.controls.error.content
+        assert OTHER_SINGLE in tab.controls.error.content
         monkeypatch.undo()
-        assert tab.open(key(app, "f169"))  # a failure is not cached
+        assert tab.open(key(app, OTHER_SINGLE))  # a failure is not cached
 
 
 def test_names_from_the_browser_are_never_paths(app):
@@ -228,19 +260,19 @@ def test_names_from_the_browser_are_never_paths(app):
 def test_compare_mode(app):
     client, tab = connect(app)
     with client:
-        tab.open(key(app, "ep000_train"))
+        tab.open(key(app, TRAIN))
         n_plots = len(tab.plots.plots)
-        assert tab.set_compare(key(app, "ep000_novel"))
+        assert tab.set_compare(key(app, NOVEL))
         assert tab.compare is not None and tab.scene.cmp_arm is not None and tab.scene.cmp_arm.visible
         assert len(tab.plots.plots) == n_plots + 1  # the divergence plot
-        assert "ep000_novel" in tab.controls.compare_info.content
+        assert NOVEL in tab.controls.compare_info.content
         # the compared rollout's imagined frames sit beside the open one's, view by view
         assert tab.compare.frames.decoded.wait(120)
         tab.set_step(300, force=True)
-        assert set(tab.compare_pairs) == {"front", "gripper", "top"}
+        assert set(tab.compare_pairs) == set(VIEWS)
         assert all(p.imagined and p.imagined_index == 300 for p in tab.compare_pairs.values())
         html = tab.video.html.content
-        assert html.count("data-kind='compare'") == 3 and "ep000_novel · imagined" in html
+        assert html.count("data-kind='compare'") == len(VIEWS) and f"{NOVEL} · imagined" in html
         assert tab.set_compare(None) and not tab.scene.cmp_arm.visible
         tab.set_step(301, force=True)
         assert tab.compare_pairs == {} and "data-kind='compare'" not in tab.video.html.content
@@ -249,23 +281,23 @@ def test_compare_mode(app):
 def test_view_selector_shows_one_view_large(app):
     client, tab = connect(app)
     with client:
-        tab.open(key(app, "ep000_train"))
+        tab.open(key(app, LONG))
         assert tab.loaded.frames.decoded.wait(120)
-        assert tab.video.view.options == ("all views", "front", "gripper", "top")
-        tab.video.view.value = "top"
+        assert tab.video.view.options == ("all views", *VIEWS)
+        tab.video.view.value = "wrist"
         tab._redraw_video()
-        assert [p.view for p in tab.pairs] == ["top"]
+        assert [p.view for p in tab.pairs] == ["wrist"]
         assert "repeat(1," in tab.video.html.content  # stacked, full width
 
 
 def test_one_chunk_has_no_chunk_controls_and_the_camera_frames_the_scene(app):
     client, tab = connect(app)
     with client:
-        tab.open(key(app, "f084"))  # a single chunk
+        tab.open(key(app, SINGLE))  # a single chunk
         assert not tab.controls.chunk.visible and not tab.controls.nav.visible
         assert tab.controls.step_in_chunk.label == "Step" and tab.controls.step_in_chunk.max == 23
         assert "chunk" not in tab.controls.readout.content.split("<br>")[0]
-        tab.open(key(app, "ep000_train"))
+        tab.open(key(app, LONG))
         assert tab.controls.chunk.visible and tab.controls.chunk.max == 59
         # the camera looks at the middle of what is drawn, from far enough to see all of it
         scene = tab.loaded.scene
@@ -281,7 +313,7 @@ def client_camera(tab):
 
 def test_playback_advances_and_stops(app):
     client, tab = connect(app)
-    tab.open(key(app, "ep000_train"))
+    tab.open(key(app, LONG))
     tab.speed = 4.0
     tab.play()
     time.sleep(0.6)
@@ -303,7 +335,7 @@ def test_notes_from_two_tabs_both_survive(app, sessions):
     c1, t1 = connect(app)
     c2, t2 = connect(app)
     with c1, c2:
-        k = key(app, "ep000_train")
+        k = key(app, LONG)
         t1.open(k)
         t2.open(k)
         t1.set_chunk(4)
@@ -318,7 +350,7 @@ def test_notes_from_two_tabs_both_survive(app, sessions):
             th.join()
         assert results == [True, True]
         data = json.loads((sessions[1] / "annotations.json").read_text())
-        chunks = data["rollouts"]["ep000_train"]["chunks"]
+        chunks = data["rollouts"][LONG]["chunks"]
         assert chunks["4"] == {"flag": True, "note": "tab one"}
         assert chunks["9"] == {"flag": True, "note": "tab two"}
 
@@ -327,7 +359,7 @@ def test_export_sends_the_recording(app):
     pytest.importorskip("inspector.export.recording")
     client, tab = connect(app)
     with client:
-        assert tab.open(key(app, "f084"))
+        assert tab.open(key(app, SINGLE))
         before = client.received_bytes
         thread = tab.export()
         thread.join(120)
@@ -404,7 +436,7 @@ def test_cli_serve_subprocess(sessions):
             lines.append(line)
             if "inspector: serving" in line or proc.poll() is not None:
                 break
-        assert "inspector: serving 6 rollout(s)" in "".join(lines), "".join(lines)
+        assert f"inspector: serving {len(ROLLOUTS)} rollout(s)" in "".join(lines), "".join(lines)
         assert f"127.0.0.1:{port}" in "".join(lines)  # loopback unless --host
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10) as r:
             assert r.status == 200 and b"<html" in r.read().lower()
@@ -424,7 +456,7 @@ def test_playback_swaps_in_clips_of_the_shown_frames_and_back(app):
     the playback rate; a second Play finds them cached; Pause brings the step's images back."""
     client, tab = connect(app)
     with client:
-        tab.open(key(app, "ep000_train"))
+        tab.open(key(app, LONG))
         wait_until(tab.loaded.frames.done.is_set, timeout=120, what="the frames")
         tl = tab.loaded.timeline
         tab.speed = 0.25  # a slow clock: the clip is ready long before playback ends

@@ -1,8 +1,10 @@
 """The web app in a real browser: Debian Chromium driven by Playwright.
 
-One app serves a session imported from the shared DreamZero fixtures, with one rollout broken on
-purpose (``f000``: truncated actions.npy). Set ``INSPECTOR_DOCS_SCREENSHOT=1`` to also refresh
-``docs/screenshot.png`` (the bundled demo) and ``docs/imported.png`` (the fixture session).
+One app serves a copy of the bundled demo's rollouts (``test_app.make_sessions``), with faults
+planted on purpose (``BROKEN``: truncated actions.npy; ``CARRIED_GT``: a truncated GT video). Set
+``INSPECTOR_DOCS_SCREENSHOT=1`` to also refresh ``docs/screenshot.png`` (the bundled demo) and,
+where the real DreamZero-SO101 outputs are found (``$INSPECTOR_FIXTURES``), ``docs/imported.png``
+(those outputs imported).
 """
 
 from __future__ import annotations
@@ -28,7 +30,8 @@ from browser import (
     slider_thumb,
     wait_until,
 )
-from test_app import make_sessions
+from conftest import real_fixtures_dir, real_outputs_skip_reason
+from test_app import BROKEN, LONG, NOVEL, SINGLE, TRAIN, VIEWS, make_sessions
 
 from inspector.app import serve
 
@@ -41,8 +44,8 @@ SCENE_BOX = (420, 120, 960, 900)  # part of a 1600x1000 page where the 3D canvas
 
 
 @pytest.fixture(scope="module")
-def app(fixtures_dir, tmp_path_factory):
-    _, broken = make_sessions(fixtures_dir, tmp_path_factory.mktemp("browser"))
+def app(tmp_path_factory):
+    _, broken = make_sessions(tmp_path_factory.mktemp("browser"))
     app = serve([broken], port=0, block=False)
     yield app
     app.stop()
@@ -93,18 +96,18 @@ def open_in_page(page, tab, app, tag: str) -> None:
 
 def test_page_loads_and_scene_renders(browser, app):
     page, tab = new_page(browser, app)
-    open_in_page(page, tab, app, "ep000_train")
-    assert set(frame_sources(page)) == {f"{v}/{k}" for v in ("front", "gripper", "top") for k in ("imagined", "gt")}
+    open_in_page(page, tab, app, LONG)
+    assert set(frame_sources(page)) == {f"{v}/{k}" for v in VIEWS for k in ("imagined", "gt")}
     page.wait_for_timeout(1500)  # let the software renderer draw the arm
     assert canvas_is_drawn(page.screenshot(), SCENE_BOX), "the 3D canvas is blank"
-    assert page.get_by_text("Pick the red cube").first.is_visible()
+    assert page.get_by_text(tab.loaded.timeline.rollout.prompt).first.is_visible()
     assert page.get_by_text("arm degrees, gripper 0..100").first.is_visible()  # unit mode always shown
     page.close()
 
 
 def test_chunk_slider_moves_server_state_and_video(browser, app):
     page, tab = new_page(browser, app)
-    open_in_page(page, tab, app, "ep000_train")
+    open_in_page(page, tab, app, LONG)
     before = frame_sources(page)
     thumb = slider_thumb(page, re.compile(r"^Chunk$"))
     thumb.focus()
@@ -130,7 +133,7 @@ def test_keys_step_the_timeline_without_moving_the_3d_view(browser, app):
     import numpy as np
 
     page, tab = new_page(browser, app)
-    open_in_page(page, tab, app, "ep000_train")
+    open_in_page(page, tab, app, LONG)
 
     def camera():
         try:
@@ -172,7 +175,7 @@ def test_keys_step_the_timeline_without_moving_the_3d_view(browser, app):
 
 def test_play_button_and_step_keys(browser, app):
     page, tab = new_page(browser, app)
-    open_in_page(page, tab, app, "ep000_train")
+    open_in_page(page, tab, app, LONG)
     page.get_by_role("button", name="Play").click()
     wait_until(lambda: tab.playing and tab.step > 5, what="playback to advance")
     page.get_by_role("button", name="Pause").click()
@@ -268,8 +271,8 @@ def _settled_frames(page, timeout_s: float = 30.0) -> dict[str, str]:
 def test_two_pages_hold_independent_timelines(browser, app):
     p1, t1 = new_page(browser, app)
     p2, t2 = new_page(browser, app)
-    open_in_page(p1, t1, app, "ep000_train")
-    open_in_page(p2, t2, app, "ep000_train")
+    open_in_page(p1, t1, app, LONG)
+    open_in_page(p2, t2, app, LONG)
     # compare settled frames: until decoding ends, the panel changes from "loading" on its own
     assert t2.loaded.frames.done.wait(timeout=60)
     frames2 = _settled_frames(p2)
@@ -288,27 +291,32 @@ def test_two_pages_hold_independent_timelines(browser, app):
 
 def test_broken_rollout_shows_error_card_and_others_still_load(browser, app):
     page, tab = new_page(browser, app)
-    select_option(page, "Rollout", key(app, "f000") + " ⚠")
+    select_option(page, "Rollout", key(app, BROKEN) + " ⚠")
     card = page.locator(".inspector-error-card")
     card.wait_for(state="visible", timeout=20_000)
     assert "actions.npy" in card.inner_text()
     assert tab.loaded is None and tab.error is not None
-    open_in_page(page, tab, app, "f084")
+    open_in_page(page, tab, app, SINGLE)
     assert page.locator(".inspector-error-card").count() == 0 or not card.is_visible()
     page.close()
 
 
 def test_screenshot(browser, app, tmp_path):
-    """Screenshots of the app: the fixture session's imported rollout and, when it is built, the
-    bundled demo; with INSPECTOR_DOCS_SCREENSHOT=1 they refresh docs/imported.png and
-    docs/screenshot.png."""
+    """Screenshots of the app (the 3D scene drawn): its 60-chunk rollout; with
+    INSPECTOR_DOCS_SCREENSHOT=1 also the bundled demo, refreshing docs/screenshot.png, and the real
+    DreamZero-SO101 outputs imported, where found, refreshing docs/imported.png."""
     from inspector.data.session import is_session
     from inspector.data.sources import BUNDLED_DEMO
 
-    shots = [(app, "ep000_train", DOCS_IMPORTED)]
+    shots: list[tuple[object, str | None, Path | None]] = [(app, LONG, None)]
     if os.environ.get("INSPECTOR_DOCS_SCREENSHOT") and is_session(BUNDLED_DEMO):
         demo = serve([BUNDLED_DEMO], port=0, block=False)
         shots.append((demo, None, DOCS_SCREENSHOT))
+    if os.environ.get("INSPECTOR_DOCS_SCREENSHOT") and real_outputs_skip_reason() is None:
+        from inspector.data.importers.dreamzero_so101 import import_dreamzero
+
+        imported = import_dreamzero(real_fixtures_dir() / "dreamzero_so101", tmp_path / "dz", log=lambda _: None)
+        shots.append((serve([imported], port=0, block=False), "ep000_train", DOCS_IMPORTED))
     try:
         for shot_app, tag, docs_path in shots:
             page, tab = new_page(browser, shot_app)
@@ -319,10 +327,10 @@ def test_screenshot(browser, app, tmp_path):
             tab.set_chunk(min(tl.worst_chunk()[0], tl.n_chunks - 1) if tl.kind == "autoregressive" else 0, 4)
             wait_until(lambda: tab.loaded.frames.done.is_set(), timeout=60, what="PSNR")
             page.wait_for_timeout(2500)
-            out = tmp_path / docs_path.name
+            out = tmp_path / (docs_path.name if docs_path is not None else "app.png")
             page.screenshot(path=str(out))
             assert canvas_is_drawn(out.read_bytes(), SCENE_BOX)
-            if os.environ.get("INSPECTOR_DOCS_SCREENSHOT"):
+            if docs_path is not None:
                 docs_path.parent.mkdir(exist_ok=True)
                 docs_path.write_bytes(out.read_bytes())
             page.close()
@@ -348,13 +356,13 @@ def test_compare_shows_the_second_rollouts_video(browser, app):
     """Training vs novel prompt: the compared rollout's imagined frames show beside the first's,
     for every view, in the page."""
     page, tab = new_page(browser, app)
-    open_in_page(page, tab, app, "ep000_train")
+    open_in_page(page, tab, app, TRAIN)
     page.get_by_text("Compare", exact=True).first.click()  # the folder starts closed
-    select_option(page, "Compare with", key(app, "ep000_novel"))
+    select_option(page, "Compare with", key(app, NOVEL))
     wait_until(lambda: tab.compare is not None and tab.compare.frames.done.is_set(), timeout=90,
                what="the compared rollout to load")
-    tab.set_chunk(5, 0)  # past the shared conditioning frame: the two prompts' videos differ
-    views = {"front", "gripper", "top"}
+    tab.set_chunk(1, 4)  # where the novel prompt veers off: the two prompts' videos differ
+    views = set(VIEWS)
 
     def compared_in_page() -> bool:
         shown = frame_sources(page)
@@ -368,7 +376,7 @@ def test_compare_shows_the_second_rollouts_video(browser, app):
 def test_single_chunk_rollout_shows_the_step_slider_only(browser, app):
     """A single-chunk sample has one chunk: no chunk slider, no prev/next/worst buttons."""
     page, tab = new_page(browser, app)
-    open_in_page(page, tab, app, "f084")
+    open_in_page(page, tab, app, SINGLE)
     assert tab.loaded.timeline.n_chunks == 1
     chunk_slider = page.locator("label", has_text=re.compile(r"^Chunk$")).first
     wait_until(lambda: not chunk_slider.is_visible(), what="the chunk slider to hide")
@@ -378,7 +386,7 @@ def test_single_chunk_rollout_shows_the_step_slider_only(browser, app):
     thumb.focus()
     page.keyboard.press("ArrowRight")
     wait_until(lambda: tab.step == 1, what="the step slider to move the tab")
-    open_in_page(page, tab, app, "ep000_train")  # and back for a chunked rollout
+    open_in_page(page, tab, app, LONG)  # and back for a chunked rollout
     wait_until(chunk_slider.is_visible, what="the chunk slider to come back")
     page.close()
 
@@ -426,7 +434,7 @@ def test_the_camera_is_fitted_to_the_canvas_the_page_has(browser, app):
     import numpy as np
 
     page, tab = new_page(browser, app)
-    open_in_page(page, tab, app, "ep000_train")
+    open_in_page(page, tab, app, LONG)
     camera = tab.client.camera
 
     def fitted_to_canvas() -> bool:
@@ -451,7 +459,7 @@ def test_notes_are_saved_to_annotations(browser, app):
     import json
 
     page, tab = new_page(browser, app)
-    open_in_page(page, tab, app, "ep000_train")
+    open_in_page(page, tab, app, LONG)
     page.get_by_text("Notes", exact=True).first.click()  # the folder starts closed
     page.get_by_label("Rollout note", exact=True).fill("grasp slips at chunk 12")  # fields found by label
     page.get_by_label("Chunk note", exact=True).fill("cube out of view")
@@ -460,7 +468,7 @@ def test_notes_are_saved_to_annotations(browser, app):
 
     def saved() -> dict | None:  # the rollout's note and then the chunk's are written
         try:
-            entry = json.loads(annotations.read_text())["rollouts"]["ep000_train"]
+            entry = json.loads(annotations.read_text())["rollouts"][LONG]
         except (OSError, ValueError, KeyError):
             return None
         return entry if "0" in entry.get("chunks", {}) else None

@@ -8,7 +8,7 @@ and annotation writers killed mid-write (DESIGN §6 and §9).
 - ``inspector serve`` listens on loopback only unless ``--host``; a share URL only on ``--share``.
 - An annotations writer SIGKILLed at any moment leaves a complete ``annotations.json``.
 
-Reuses the fixtures of ``test_app`` (sessions imported from ``../shared/fixtures``) and the page
+Reuses the fixtures of ``test_app`` (the bundled demo's rollouts copied into sessions) and the page
 helpers of ``test_app_browser``.
 """
 
@@ -34,7 +34,20 @@ from pathlib import Path
 
 import pytest
 from browser import PAGE_TIMEOUT_S, frame_sources, open_page, skip_reason, slider_thumb, wait_until
-from test_app import app, connect, key, sessions  # noqa: F401  (app and sessions are fixtures)
+from test_app import (  # noqa: F401  (app and sessions are fixtures)
+    BROKEN,
+    CARRIED_GT,
+    LIMITS,
+    LONG,
+    NOVEL,
+    OTHER_SINGLE,
+    SINGLE,
+    TRAIN,
+    app,
+    connect,
+    key,
+    sessions,
+)
 from test_app_browser import browser, open_in_page, page_tab  # noqa: F401  (browser is a fixture)
 
 from inspector.app import HeadlessClient, serve
@@ -110,8 +123,8 @@ def test_four_browser_pages_hold_their_own_timelines(browser, app, server_errors
     # Per page: the rollout picked in its picker (None: the one it opens with), the slider it
     # scrubs with the keyboard, how many steps right, and where that puts it (rollout, step).
     default = app.catalog.default_key()
-    plan = [(None, chunk, 3, default, 3 * 9), ("ep000_train", chunk, 7, key(app, "ep000_train"), 7 * 9),
-            ("f084", step, 4, key(app, "f084"), 4), (None, chunk, 10, default, 10 * 9)]
+    plan = [(None, chunk, 3, default, 3 * 9), (LONG, chunk, 7, key(app, LONG), 7 * 9),
+            (SINGLE, step, 4, key(app, SINGLE), 4), (None, chunk, 10, default, 10 * 9)]
     # Four pages (one context each) load at once.
     pages, page_errors = [], []
     for n in range(len(plan)):
@@ -213,26 +226,26 @@ def _under(path: str, root: Path) -> bool:
 def plant_links(good: Path, tmp: Path) -> tuple[Path, Path]:
     """A copy of ``good`` with links out of it planted, and the directory they point into.
 
-    - ``rollouts/escaped`` links to a complete rollout outside;
-    - ``rollouts/f084/video/top.mp4`` links to a video outside;
-    - ``rollouts/train_ep0/gt`` links to a GT directory outside;
+    - ``rollouts/escaped`` links to a complete rollout outside (a copy of ``OTHER_SINGLE``);
+    - ``rollouts/<SINGLE>/video/wrist.mp4`` links to a video outside;
+    - ``rollouts/<CARRIED_GT>/gt`` links to a GT directory outside;
     - ``annotations.json`` links to a file outside;
-    - ``rollouts/alias`` links to ``ep000_train`` (inside: allowed).
+    - ``rollouts/alias`` links to ``LONG`` (inside: allowed).
     """
     served, outside = tmp / "served" / "sess", tmp / "outside"
     shutil.copytree(good, served, symlinks=True)
     outside.mkdir()
     rollouts = served / "rollouts"
-    shutil.copytree(rollouts / "f169", outside / "f169_copy")
-    (rollouts / "escaped").symlink_to(outside / "f169_copy", target_is_directory=True)
-    top = rollouts / "f084" / "video" / "top.mp4"
-    shutil.move(top, outside / "top.mp4")
-    top.symlink_to(outside / "top.mp4")
-    shutil.move(rollouts / "train_ep0" / "gt", outside / "gt")
-    (rollouts / "train_ep0" / "gt").symlink_to(outside / "gt", target_is_directory=True)
+    shutil.copytree(rollouts / OTHER_SINGLE, outside / "other_copy")
+    (rollouts / "escaped").symlink_to(outside / "other_copy", target_is_directory=True)
+    wrist = rollouts / SINGLE / "video" / "wrist.mp4"
+    shutil.move(wrist, outside / "wrist.mp4")
+    wrist.symlink_to(outside / "wrist.mp4")
+    shutil.move(rollouts / CARRIED_GT / "gt", outside / "gt")
+    (rollouts / CARRIED_GT / "gt").symlink_to(outside / "gt", target_is_directory=True)
     (outside / "annotations.json").write_text('{"rollouts": {"planted": {"note": "outside"}}}\n')
     (served / "annotations.json").symlink_to(outside / "annotations.json")
-    (rollouts / "alias").symlink_to("ep000_train", target_is_directory=True)
+    (rollouts / "alias").symlink_to(LONG, target_is_directory=True)
     return served, outside
 
 
@@ -244,19 +257,19 @@ def test_links_out_of_the_served_root_are_refused(sessions, tmp_path):  # noqa: 
         served_app = serve([served], port=0, block=False)
         try:
             errors = {e.tag: e.error for e in served_app.catalog.entries.values()}
-            for tag, where in (("escaped", "rollouts/escaped"), ("f084", "rollouts/f084/video/top.mp4"),
-                               ("train_ep0", "rollouts/train_ep0/gt")):
+            for tag, where in (("escaped", "rollouts/escaped"), (SINGLE, f"rollouts/{SINGLE}/video/wrist.mp4"),
+                               (CARRIED_GT, f"rollouts/{CARRIED_GT}/gt")):
                 assert isinstance(errors[tag], InspectorError) and ESCAPE in str(errors[tag]), errors[tag]
                 assert errors[tag].file.endswith(where), errors[tag].file
             ok = {t for t, e in errors.items() if e is None}
-            assert ok == {"alias", "ep000_novel", "ep000_train", "f000", "f169"}
+            assert ok == {"alias", LONG, TRAIN, NOVEL, LIMITS, BROKEN, OTHER_SINGLE}
             client, tab = connect(served_app)
             with client:
-                for tag, name in (("escaped", "escaped"), ("f084", "top.mp4"), ("train_ep0", "gt")):
+                for tag, name in (("escaped", "escaped"), (SINGLE, "wrist.mp4"), (CARRIED_GT, "gt")):
                     assert not tab.open(key(served_app, tag))
                     card = tab.controls.error.content
                     assert tab.controls.error.visible and ESCAPE in card and name in card, card
-                for tag in ("ep000_train", "alias", "ep000_novel"):
+                for tag in (LONG, "alias", NOVEL):
                     assert tab.open(key(served_app, tag)), tab.error
                     assert tab.loaded.frames.done.wait(180)
                 # annotations.json leads out: the notes say so, and nothing is read or written there.
@@ -265,12 +278,12 @@ def test_links_out_of_the_served_root_are_refused(sessions, tmp_path):  # noqa: 
                 assert ESCAPE in tab.controls.notes_info.content
                 assert (served / "annotations.json").is_symlink()
                 # A link planted after start-up is refused when the rollout is first opened.
-                video = served / "rollouts" / "f169" / "video" / "front.mp4"
+                video = served / "rollouts" / OTHER_SINGLE / "video" / "front.mp4"
                 shutil.move(video, outside / "late.mp4")
                 video.symlink_to(outside / "late.mp4")
-                assert not tab.open(key(served_app, "f169"))
+                assert not tab.open(key(served_app, OTHER_SINGLE))
                 assert ESCAPE in tab.controls.error.content and "front.mp4" in tab.controls.error.content
-                assert tab.open(key(served_app, "ep000_train"))  # and the others still work
+                assert tab.open(key(served_app, LONG))  # and the others still work
         finally:
             served_app.stop()
     finally:
@@ -307,15 +320,15 @@ def test_unconfined_open_still_follows_links(sessions, tmp_path):  # noqa: F811
     finally:
         OpenedFiles.stop()
     try:
-        assert "escaped" in sources.sessions[0].rollouts and "f084" in sources.sessions[0].rollouts
+        assert "escaped" in sources.sessions[0].rollouts and SINGLE in sources.sessions[0].rollouts
     finally:
         sources.close()
     # (which shows the audit hook of the test above does see reads through such links)
     assert any(_under(p, outside) for p in opened)
     sources = open_sources([served], confine=True)
     try:
-        assert sources.serves(served / "rollouts" / "ep000_train") and not sources.serves(tmp_path / "outside")
-        assert {"escaped", "f084", "train_ep0"} <= set(sources.sessions[0].errors)
+        assert sources.serves(served / "rollouts" / LONG) and not sources.serves(tmp_path / "outside")
+        assert {"escaped", SINGLE, CARRIED_GT} <= set(sources.sessions[0].errors)
     finally:
         sources.close()
 
@@ -335,9 +348,12 @@ def test_annotations_lock_link_is_not_followed(tmp_path):
 HOSTILE_ANNOTATIONS = {
     "nested-100k-deep": ("[" * 100_000, "invalid JSON (RecursionError"),
     "5000-digit-integer": ('{"rollouts": {}, "n": 1' + "0" * 5000 + "}", "invalid JSON (ValueError: Exceeds the limit"),
-    "chunks-a-list": ('{"rollouts": {"f084": {"chunks": [1, 2]}}}', "rollouts.f084.chunks: expected an object, found list"),
-    "flag-a-string": ('{"rollouts": {"f084": {"flag": "yes"}}}', "rollouts.f084.flag: expected true or false, found 'yes'"),
-    "chunk-key-not-an-index": ('{"rollouts": {"f169": {"chunks": {"x": {}}}}}', "expected chunk indexes as keys, found 'x'"),
+    "chunks-a-list": (json.dumps({"rollouts": {SINGLE: {"chunks": [1, 2]}}}),
+                      f"rollouts.{SINGLE}.chunks: expected an object, found list"),
+    "flag-a-string": (json.dumps({"rollouts": {SINGLE: {"flag": "yes"}}}),
+                      f"rollouts.{SINGLE}.flag: expected true or false, found 'yes'"),
+    "chunk-key-not-an-index": (json.dumps({"rollouts": {OTHER_SINGLE: {"chunks": {"x": {}}}}}),
+                               "expected chunk indexes as keys, found 'x'"),
     "rollouts-a-string": ('{"rollouts": "all"}', "rollouts: expected an object, found 'all'"),
     "nan": ('{"rollouts": {}, "score": NaN}', "score: non-finite number nan"),
     "not-utf8": (b"\xff\xfe\x00{", "invalid JSON"),
@@ -382,7 +398,7 @@ def test_app_shows_hostile_annotations_on_the_notes_panel(sessions, tmp_path, se
     rollout opens and scrubs; the server logs no exception)."""
     served = tmp_path / "sess"
     shutil.copytree(sessions[0], served)
-    for tag in ("ep000_novel", "ep000_train", "train_ep0", "f000"):
+    for tag in (LONG, TRAIN, NOVEL, LIMITS, CARRIED_GT, BROKEN):
         shutil.rmtree(served / "rollouts" / tag)
     served_app = serve([served], port=0, block=False)
     try:
@@ -391,7 +407,7 @@ def test_app_shows_hostile_annotations_on_the_notes_panel(sessions, tmp_path, se
             for i, (name, (content, message)) in enumerate(HOSTILE_ANNOTATIONS.items()):
                 _plant_annotations(served, content)
                 before = _snapshot(served / "annotations.json")
-                tag = ("f084", "f169")[i % 2]  # a rollout opened anew reads the notes anew
+                tag = (SINGLE, OTHER_SINGLE)[i % 2]  # a rollout opened anew reads the notes anew
                 assert tab.open(key(served_app, tag)), (name, tab.error)
                 notes = tab.controls.notes_info.content
                 assert "inspector-error-card" in notes and "annotations.json" in notes, (name, notes)
@@ -402,8 +418,8 @@ def test_app_shows_hostile_annotations_on_the_notes_panel(sessions, tmp_path, se
                 assert tab.set_step(5) == 5 and tab.chunk == 0  # the rest keeps working
             # a sound file again: notes save
             _plant_annotations(served, '{"rollouts": {}}')
-            assert tab.open(key(served_app, "f084")) and tab.save_notes(rollout_flag=True, rollout_note="ok")
-            assert read_annotations(served)["rollouts"]["f084"]["note"] == "ok"
+            assert tab.open(key(served_app, SINGLE)) and tab.save_notes(rollout_flag=True, rollout_note="ok")
+            assert read_annotations(served)["rollouts"][SINGLE]["note"] == "ok"
     finally:
         served_app.stop()
     assert server_errors == []
@@ -418,8 +434,8 @@ def test_browser_names_sent_over_the_wire_are_not_paths(app, sessions):  # noqa:
         tab.set_compare = lambda k: (compared.append(k), set_compare(k))[1]  # (what the dropdown calls)
         files = OpenedFiles.start()
         try:
-            values = ("../../../../etc/passwd", "/etc/passwd", str(sessions[0] / "rollouts" / "f084"),
-                      "fixture / ../../etc")
+            values = ("../../../../etc/passwd", "/etc/passwd", str(sessions[0] / "rollouts" / SINGLE),
+                      "demo / ../../etc")
             for value in values:
                 client.set_gui_value(tab.controls.picker._impl.uuid, value)
                 client.set_gui_value(tab.controls.compare._impl.uuid, value)
@@ -428,9 +444,9 @@ def test_browser_names_sent_over_the_wire_are_not_paths(app, sessions):  # noqa:
             wait_until(lambda: len(compared) >= len(values), timeout=60, what="the hostile values to reach the tab")
             time.sleep(1.0)
             # Then a real choice, sent the same way: the tab opens it, and only it.
-            target = key(app, "f084")
+            target = key(app, SINGLE)
             client.set_gui_value(tab.controls.picker._impl.uuid, tab.controls.key_to_option[target])
-            wait_until(lambda: tab.key == target and tab.loaded is not None, timeout=60, what="f084 to open")
+            wait_until(lambda: tab.key == target and tab.loaded is not None, timeout=60, what=f"{SINGLE} to open")
             time.sleep(0.5)  # (stragglers on viser's pool)
         finally:
             OpenedFiles.stop()
@@ -553,12 +569,12 @@ def test_serve_binds_loopback_unless_host_is_given(sessions):  # noqa: F811
     assert not listening(port=port) and not listening(port=port2)
 
 
-def test_sigterm_stops_serve_and_removes_imported_sessions(dreamzero_dir, tmp_path):
+def test_sigterm_stops_serve_and_removes_imported_sessions(dz_layout, tmp_path):
     """``kill`` / ``docker stop`` stop the server as Ctrl-C does: exit status 0, and the temporary
     session a raw model output was imported into is gone from the temp folder."""
     temp = tmp_path / "tmp"
     temp.mkdir()
-    proc, lines, reader = start_cli_serve(dreamzero_dir / "demo", env={"TMPDIR": str(temp)})
+    proc, lines, reader = start_cli_serve(dz_layout / "demo", env={"TMPDIR": str(temp)})
     try:
         served_port(proc, lines)
         imported = [p.name for p in temp.iterdir()]

@@ -1,6 +1,6 @@
 """LeRobot datasets on their own: episodes browsed in the app, exported, reported (tracking error).
 
-The datasets are the shared fixtures written by LeRobot itself (v3.0 with three episodes and two
+The datasets are the ones LeRobot itself wrote (``tests/data/lerobot``: v3.0 with three episodes and two
 AV1 cameras, v2.1 with two episodes and one) and the demo's own dataset.
 """
 
@@ -27,13 +27,13 @@ RERUN = Path(sys.executable).parent / "rerun"
 
 
 @pytest.fixture(scope="module")
-def v30(fixtures_dir) -> Path:
-    return fixtures_dir / "lerobot" / "so101_v30"
+def v30(lerobot_dir) -> Path:
+    return lerobot_dir / "so101_v30"
 
 
 @pytest.fixture(scope="module")
-def v21(fixtures_dir) -> Path:
-    return fixtures_dir / "lerobot" / "so101_v21"
+def v21(lerobot_dir) -> Path:
+    return lerobot_dir / "so101_v21"
 
 
 def _raw_joints(root: Path, episode: int) -> tuple[np.ndarray, np.ndarray]:

@@ -291,10 +291,10 @@ def test_progress_bar_counts_requests_with_rate(dataset: Path, tmp_path: Path, c
 
 
 @pytest.mark.parametrize("version, cameras", [("so101_v30", ["front", "wrist"]), ("so101_v21", ["front"])])
-def test_lerobot_written_datasets_send_their_own_frames(fixtures_dir: Path, tmp_path: Path, version: str,
+def test_lerobot_written_datasets_send_their_own_frames(lerobot_dir: Path, tmp_path: Path, version: str,
                                                         cameras: list[str]) -> None:
     """Datasets LeRobot itself wrote (AV1): each image sent is the dataset's frame, decoded alone."""
-    dataset = fixtures_dir / "lerobot" / version
+    dataset = lerobot_dir / version
     config = {**DEFAULT_CONFIG, "image_resolution": None, "n_external_cameras": 1,
               "needs_wrist_camera": "wrist" in cameras}
     with policy_server(config=config) as server:

@@ -134,16 +134,15 @@ def _mesh_cache(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
-def fixture_session(fixtures_dir, tmp_path_factory) -> Path:
-    from inspector.data.importers.dreamzero_so101 import import_dreamzero
-
-    dest = tmp_path_factory.mktemp("dz") / "session"
-    return import_dreamzero(fixtures_dir / "dreamzero_so101", dest, log=lambda _: None)
+def fixture_session(dz_layout_session) -> Path:
+    """The DreamZero-SO101 layout made from the demo, imported (``dreamzero_layout.py``)."""
+    return dz_layout_session
 
 
 @pytest.fixture(scope="session")
 def fixture_export(fixture_session, tmp_path_factory):
-    """ep000_train (60 chunks, three views, carried GT video, no GT joints) exported once."""
+    """ep000_train (60 chunks on a 409-frame episode, two views, carried GT video, no GT joints,
+    the gripper planted past its limit) exported once."""
     session = open_session(fixture_session)
     tl = build_timeline(session.rollouts["ep000_train"])
     calls: list[tuple[float, str]] = []
@@ -207,7 +206,7 @@ def synthetic_export(synthetic_session, tmp_path_factory):
 
 
 # ----------------------------------------------------------------------------------------------
-# The fixture rollout: 60 chunks, three views, no GT joints
+# The imported rollout: 60 chunks, two views, no GT joints
 
 
 def test_fixture_recording_verifies_and_is_small(fixture_export):
@@ -249,7 +248,7 @@ def test_fixture_video_references_count_imagined_frames(fixture_export):
         assert np.all(np.diff([r[0] for r in refs]) > 0)
         assert rec.static(L.video_path(view, "imagined"), "AssetVideo:media_type") == [["video/mp4"]]
         gt_frames, _ = rec.temporal(L.video_path(view, "gt"), "VideoFrameReference:timestamp")
-        assert list(gt_frames) == list(range(328))  # carried GT: frame i pairs with imagined frame i
+        assert list(gt_frames) == list(range(409))  # carried GT: frame i pairs with imagined frame i
     assert not rec.has("image")  # never one image per frame
 
 
@@ -264,15 +263,15 @@ def test_fixture_series_lengths(fixture_export):
         for k, side in enumerate(("lower_limit", "upper_limit")):
             _, limit = rec.scalars(L.joint_plot(joint, side))
             np.testing.assert_allclose(limit, [tl.limits[j, k]] * 2)
-    assert tl.limit_violation.any()  # the raw model output leaves its limits (gripper -110)
+    assert tl.limit_violation.any()  # planted: the gripper at -40 (limit -10), as raw model outputs do
     for view in tl.video_views():
         frames, psnr = rec.scalars(L.psnr_path(view), order_by=L.FRAME)
         expected = tl.video_metrics(view).psnr_db
-        assert len(psnr) == np.isfinite(expected).sum() == 328
+        assert len(psnr) == np.isfinite(expected).sum() == 409
         np.testing.assert_allclose(psnr, expected[frames])
     _, starts = rec.temporal(L.EVENTS, "TextLog:text", L.TIME)
     assert len(starts) == tl.n_chunks + 1  # every chunk start and the episode's end
-    assert any("episode ends at step 328" in t[0] for t in starts)
+    assert any("episode ends at step 409" in t[0] for t in starts)
     _, end = rec.scalars(f"{L.MARKERS}/episode_end", order_by=L.FRAME)
     assert len(end) == 1
     assert not rec.has(L.DRIFT_SERIES[0][1])  # no GT joints, no drift
@@ -328,10 +327,10 @@ def test_gt_joint_recording(synthetic_export):
     assert "after the episode" in text  # 540 steps outlast the 400-step episode
 
 
-def test_dataset_gt_video_is_reencoded_to_h264(fixtures_dir, tmp_path):
+def test_dataset_gt_video_is_reencoded_to_h264(lerobot_dir, tmp_path):
     """GT from a LeRobot v3.0 dataset (AV1, three episodes in one file): the episode's frames
     become a new H.264 asset, frame k paired with the imagined frame showing the same step."""
-    dataset = fixtures_dir / "lerobot" / "so101_v30"
+    dataset = lerobot_dir / "so101_v30"
     if probe(next((dataset / "videos").rglob("*.mp4"))).codec == "h264":
         pytest.skip("fixture video is already H.264")
     root = tmp_path / "ds_session"
@@ -574,22 +573,22 @@ def test_cli_exports_one_file_per_rollout(synthetic_session, tmp_path, capsys):
 
 
 def test_cli_single_rollout_to_file(fixture_session, tmp_path, capsys):
-    dest = tmp_path / "f084.rrd"
-    assert cli_main(["export", str(fixture_session), "--rollout", "f084", "-o", str(dest),
+    dest = tmp_path / "f076.rrd"
+    assert cli_main(["export", str(fixture_session), "--rollout", "f076", "-o", str(dest),
                      "--views", "front"]) == 0
     rrd_verify(dest)
     rec = Recording(dest)
-    assert rec.has(L.video_path("front", "imagined")) and not rec.has(L.video_path("top", "imagined"))
+    assert rec.has(L.video_path("front", "imagined")) and not rec.has(L.video_path("gripper", "imagined"))
     assert rec.has(L.arm_root("gt"))  # single chunks carry GT joints
 
 
-def test_cli_rollout_directory_and_source_dir(fixtures_dir, fixture_session, tmp_path):
+def test_cli_rollout_directory_and_source_dir(dz_layout, fixture_session, tmp_path):
     assert cli_main(["export", str(fixture_session / "rollouts" / "f000"), "-o",
                      str(tmp_path / "a.rrd")]) == 0
     rrd_verify(tmp_path / "a.rrd")
-    src = fixtures_dir / "dreamzero_so101" / "zeroshot_chunk" / "f169"
+    src = dz_layout / "zeroshot_chunk" / "f153"
     assert cli_main(["export", str(src), "-o", str(tmp_path / "b")]) == 0
-    assert [p.name for p in (tmp_path / "b").iterdir()] == ["f169.rrd"]
+    assert [p.name for p in (tmp_path / "b").iterdir()] == ["f153.rrd"]
 
 
 @pytest.mark.parametrize("args, message", [

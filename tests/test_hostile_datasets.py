@@ -140,8 +140,8 @@ def test_an_episode_listed_twice_is_refused(dataset: Path) -> None:
     assert_one_line_error(inspector("info", dataset), "meta/episodes", "'episode_index' 1 is listed twice")
 
 
-def test_v21_index_as_strings_is_refused(fixtures_dir: Path, tmp_path: Path) -> None:
-    root = Path(shutil.copytree(fixtures_dir / "lerobot" / "so101_v21", tmp_path / "v21"))
+def test_v21_index_as_strings_is_refused(lerobot_dir: Path, tmp_path: Path) -> None:
+    root = Path(shutil.copytree(lerobot_dir / "so101_v21", tmp_path / "v21"))
     lines = (root / "meta" / "episodes.jsonl").read_text().splitlines()
     row = json.loads(lines[0])
     lines[0] = json.dumps({**row, "length": str(row["length"])})

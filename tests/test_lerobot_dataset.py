@@ -25,13 +25,11 @@ from inspector.data.video import decode
 from inspector.errors import InspectorError
 from inspector.units import JOINT_NAMES, Units, canonical_joint_name
 
-# Collected at import time so each dataset is its own test; the `fixtures_dir` fixture skips when
-# ../shared is absent.
-_LEROBOT_FIXTURES = Path(__file__).resolve().parents[2] / "shared" / "fixtures" / "lerobot"
-DATASETS = (sorted(p.name for p in _LEROBOT_FIXTURES.iterdir() if (p / INFO_PATH).is_file())
-            if _LEROBOT_FIXTURES.is_dir() else ["so101_v30", "so101_v21"])
+# Collected at import time so each dataset is its own test (tests/data/lerobot/README.md).
+_LEROBOT_DATA = Path(__file__).resolve().parent / "data" / "lerobot"
+DATASETS = sorted(p.name for p in _LEROBOT_DATA.iterdir() if (p / INFO_PATH).is_file())
 
-# What fixtures/README.md says the fixtures hold.
+# What tests/data/lerobot/README.md says the datasets hold.
 EXPECTED = {
     "so101_v30": dict(version="v3.0", cameras=["front", "wrist"], lengths=[150, 210, 240],
                       tasks=["Pick the red cube", "Pick the red cube and place it in the bowl",
@@ -42,11 +40,8 @@ EXPECTED = {
 
 
 @pytest.fixture(params=DATASETS)
-def dataset_root(request: pytest.FixtureRequest, fixtures_dir: Path) -> Path:
-    root = fixtures_dir / "lerobot" / request.param
-    if not root.is_dir():
-        pytest.skip(f"{root} not present")
-    return root
+def dataset_root(request: pytest.FixtureRequest, lerobot_dir: Path) -> Path:
+    return lerobot_dir / request.param
 
 
 def _episode_rows(ds: LeRobotDataset, index: int) -> pa.Table:
@@ -132,10 +127,10 @@ def test_video_frames_line_up(dataset_root: Path) -> None:
             assert [i for i, _ in clip.iter_frames(start=k)] == list(range(k, ep.length))
 
 
-def test_v30_episodes_are_distinct_windows(fixtures_dir: Path) -> None:
+def test_v30_episodes_are_distinct_windows(lerobot_dir: Path) -> None:
     """Episode 1's window is exactly its frames of the shared file: no frame lost or borrowed from
     episodes 0 and 2 on either side."""
-    root = fixtures_dir / "lerobot" / "so101_v30"
+    root = lerobot_dir / "so101_v30"
     if not root.is_dir():
         pytest.skip(f"{root} not present")
     ds = LeRobotDataset(root)
@@ -199,9 +194,9 @@ def test_writer_round_trip(tmp_path: Path) -> None:
     assert stats["observation.state"]["count"] == [65]
 
 
-def test_writer_matches_lerobot_layout(tmp_path: Path, fixtures_dir: Path) -> None:
+def test_writer_matches_lerobot_layout(tmp_path: Path, lerobot_dir: Path) -> None:
     """Same info.json keys/features and the same parquet columns and types as LeRobot 0.4 writes."""
-    ref = fixtures_dir / "lerobot" / "so101_v30"
+    ref = lerobot_dir / "so101_v30"
     if not ref.is_dir():
         pytest.skip(f"{ref} not present")
     root = write_lerobot_dataset(tmp_path / "ds", [_synthetic_episode(10, "t", 0, size=(240, 320))],
@@ -408,9 +403,9 @@ def test_find_dataset_not_found(tmp_path: Path, monkeypatch: pytest.MonkeyPatch)
         find_dataset(tmp_path / "a" / "b" / "c")
 
 
-def test_episode_clip_from_a_start_frame(fixtures_dir: Path) -> None:
+def test_episode_clip_from_a_start_frame(lerobot_dir: Path) -> None:
     """A rollout's GT clip starts at its start frame: frame i of the clip is episode frame start + i."""
-    root = fixtures_dir / "lerobot" / "so101_v30"
+    root = lerobot_dir / "so101_v30"
     if not root.is_dir():
         pytest.skip(f"{root} not present")
     ep = LeRobotDataset(root).episode(2)

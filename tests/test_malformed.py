@@ -1,6 +1,8 @@
-"""Malformed input, made from the valid fixtures by mutation, for ``import``, ``info``, ``report``,
+"""Malformed input, made from valid inputs by mutation, for ``import``, ``info``, ``report``,
 ``export`` and the app's catalog (the property tests of the readers are in
-``test_malformed_properties.py``).
+``test_malformed_properties.py``). The valid inputs are the repository's own: a DreamZero-SO101
+source directory made from the bundled demo (``dreamzero_layout.py``), the sessions imported from
+it, and the LeRobot-written datasets of ``tests/data/lerobot``.
 
 What "bad input" means, per command (the same words are in ``inspector/cli.py``):
 
@@ -123,17 +125,18 @@ def nan_row(rows: list) -> list:
 class Workspace:
     """Valid inputs (built once per module) that each case copies into its own directory."""
 
-    def __init__(self, root: Path, fixtures: Path) -> None:
+    def __init__(self, root: Path, dz_source: Path, lerobot: Path) -> None:
+        """``dz_source``: a DreamZero-SO101 source directory (``dreamzero_layout.py``, made from
+        the demo); ``lerobot``: the folder of the LeRobot-written datasets (``tests/data/lerobot``)."""
         from inspector.data.importers.dreamzero_so101 import import_dreamzero
 
-        self.root, self.fixtures = root, fixtures
-        self.dz = fixtures / "dreamzero_so101"
+        self.root, self.lerobot, self.dz = root, lerobot, dz_source
         base = root / "base"
-        # three single-chunk rollouts (f000, f084, f169): "one bad rollout of several"
+        # three single-chunk rollouts (f000, f076, f153): "one bad rollout of several"
         self.zs3 = import_dreamzero(self.dz / "zeroshot_chunk", base / "zs3", log=lambda _: None)
         # one single-chunk rollout: "the only rollout is bad"
-        self.zs1 = import_dreamzero(self.dz / "zeroshot_chunk" / "f084", base / "zs1", log=lambda _: None)
-        self.v30 = copy_tree(fixtures / "lerobot" / "so101_v30", base / "so101_v30")
+        self.zs1 = import_dreamzero(self.dz / "zeroshot_chunk" / "f076", base / "zs1", log=lambda _: None)
+        self.v30 = copy_tree(lerobot / "so101_v30", base / "so101_v30")
         self.ds = self.dataset_session(base / "ds", self.v30)
 
     @staticmethod
@@ -165,15 +168,15 @@ class Workspace:
         return s
 
     def source(self, case: Path, rel: str) -> Path:
-        """A DreamZero-SO101 source directory, e.g. ``zeroshot_chunk/f084``."""
+        """A DreamZero-SO101 source directory, e.g. ``zeroshot_chunk/f076``."""
         return copy_tree(self.dz / rel, case / "src" / Path(rel).name)
 
     def dataset(self, case: Path, name: str = "so101_v30") -> Path:
-        return copy_tree(self.fixtures / "lerobot" / name, case / name)
+        return copy_tree(self.lerobot / name, case / name)
 
 
-AR, SC, MOSAIC = "train_rollout/ep000_train", "zeroshot_chunk/f084", "demo/train_ep0"
-F084 = "rollouts/f084"
+AR, SC, MOSAIC = "train_rollout/ep000_train", "zeroshot_chunk/f076", "demo/train_ep0"
+F076 = "rollouts/f076"
 V30_DATA = "data/chunk-000/file-000.parquet"
 V30_FRONT = "videos/observation.images.front/chunk-000/file-000.mp4"
 
@@ -302,9 +305,9 @@ def _check_long(run: Run) -> None:
 def _check_table_lists_error(run: Run) -> None:
     """The text report shows the good rollouts and one ``error:`` line for the broken one."""
     lines = run.stdout.splitlines()
-    assert any(line.startswith("f000 ") for line in lines) and any(line.startswith("f169 ") for line in lines)
+    assert any(line.startswith("f000 ") for line in lines) and any(line.startswith("f153 ") for line in lines)
     errors = [line for line in lines if line.startswith("error: ")]
-    assert len(errors) == 1 and "f084/actions.npy" in errors[0] and "not a readable .npy" in errors[0]
+    assert len(errors) == 1 and "f076/actions.npy" in errors[0] and "not a readable .npy" in errors[0]
 
 
 def _check_absurd_1e30(run: Run) -> None:
@@ -325,7 +328,7 @@ def _check_dest_untouched(run: Run) -> None:
 
 def _check_duplicate_tags(run: Run) -> None:
     s = open_session(run.dir / "out" / "session")
-    assert sorted(s.rollouts) == ["b_f084", "f084"] and not s.errors
+    assert sorted(s.rollouts) == ["b_f076", "f076"] and not s.errors
 
 
 def _mk_empty(d: Path) -> None:
@@ -335,8 +338,8 @@ def _mk_empty(d: Path) -> None:
 
 def _two_same_name(ws: Workspace, d: Path) -> list[Any]:
     src = d / "src"
-    copy_tree(ws.dz / SC, src / "a" / "f084")
-    copy_tree(ws.dz / SC, src / "b" / "f084")
+    copy_tree(ws.dz / SC, src / "a" / "f076")
+    copy_tree(ws.dz / SC, src / "b" / "f076")
     return ["import", "dreamzero-so101", src, "-o", d / "out" / "session"]
 
 
@@ -373,7 +376,7 @@ def _check_file_untouched(run: Run) -> None:
 
 def _check_session_replaced(run: Run) -> None:
     s = open_session(run.dir / "out" / "session")
-    assert sorted(s.rollouts) == ["f084"] and not s.errors  # the old session's f000, f169 are gone
+    assert sorted(s.rollouts) == ["f076"] and not s.errors  # the old session's f000, f153 are gone
 
 
 # a newline, an escape sequence (a terminal colour) and a Unicode line separator
@@ -392,7 +395,7 @@ NON_ASCII_NAME, LONG_NAME = "épisode_日本", "a" * 250
 
 def _odd_source_names(ws: Workspace, d: Path) -> list[Any]:
     copy_tree(ws.dz / SC, d / "src" / NON_ASCII_NAME)
-    copy_tree(ws.dz / "zeroshot_chunk" / "f169", d / "src" / LONG_NAME)
+    copy_tree(ws.dz / "zeroshot_chunk" / "f153", d / "src" / LONG_NAME)
     return ["import", "dreamzero-so101", d / "src", "-o", d / "out" / "session"]
 
 
@@ -456,15 +459,15 @@ def _report_dataset_arg_broken(ws: Workspace, d: Path) -> list[Any]:
 
 def _info_rollout_path(ws: Workspace, d: Path) -> list[Any]:
     s = ws.session(d, "zs3")
-    np.save(s / F084 / "actions.npy", np.zeros((1, 24, 4)))
-    return ["info", s / F084]
+    np.save(s / F076 / "actions.npy", np.zeros((1, 24, 4)))
+    return ["info", s / F076]
 
 
 def _save(rel: str, arr: Any, **kw: Any) -> Callable[[Path], None]:
     return lambda root: np.save(root / rel, arr, **kw)
 
 
-def _scale_actions(root: Path, value: float, rel: str = F084 + "/actions.npy") -> None:
+def _scale_actions(root: Path, value: float, rel: str = F076 + "/actions.npy") -> None:
     a = np.load(root / rel)
     np.save(root / rel, np.full_like(a, value))
 
@@ -515,7 +518,7 @@ CASES: list[Case] = [
     _imp("import-sc-actions-ragged", SC, lambda s: edit_json(s / "meta.json", actions_pred=[[1] * 6] * 23 + [[1] * 5]),
          "meta.json", "actions_pred: expected a (horizon, 6) list of numbers"),
     _imp("import-sc-actions-missing-key", SC, lambda s: drop_json_key(s / "meta.json", "actions_pred"),
-         "f084", "no DreamZero-SO101 rollout found"),
+         "f076", "no DreamZero-SO101 rollout found"),
     _imp("import-sc-gt-shape-mismatch", SC, lambda s: edit_json(s / "meta.json", actions_gt=[[1] * 6] * 12),
          "meta.json", "actions_gt: shape (12, 6) differs"),
     _imp("import-sc-predicted-frames-zero", SC, lambda s: edit_json(s / "meta.json", predicted_frames=0),
@@ -531,7 +534,8 @@ CASES: list[Case] = [
     _imp("import-video-truncated", AR, lambda s: truncate(s / "rollout_front.mp4"), "rollout_front.mp4", "cannot read video"),
     _imp("import-video-not-a-video", AR, lambda s: (s / "rollout_front.mp4").write_text("not a video"),
          "rollout_front.mp4", "cannot read video"),
-    _imp("import-sc-pred-video-truncated", SC, lambda s: truncate(s / "pred_top.mp4", 0.3), "pred_top.mp4", "cannot read video"),
+    _imp("import-sc-pred-video-truncated", SC, lambda s: truncate(s / "pred_gripper.mp4", 0.3), "pred_gripper.mp4",
+         "cannot read video"),
     _imp("import-mosaic-truncated", MOSAIC, lambda s: truncate(s / "gt_future.mp4"), "gt_future.mp4", "cannot read video"),
     # ---------------------------------------------------------------- import: paths, dataset
     Case("import-empty-source-dir", lambda ws, d: ["import", "dreamzero-so101", (d / "empty").mkdir() or d / "empty",
@@ -555,8 +559,8 @@ CASES: list[Case] = [
     Case("report-raw-source-with-a-long-name", _report_long_named_source, rc=0, check=_check_long_named_report),
     Case("import-dataset-episode-beyond", _import_with_dataset(SC, lambda ds: None, "--episode", "9"),
          file="so101_v30", field="episode 9 is out of range"),
-    Case("import-dataset-start-frame-beyond", _import_with_dataset("zeroshot_chunk/f169", lambda ds: None, "--episode", "0"),
-         file="f169/meta.json", field="start frame 169 lies beyond episode 0 (150 frames)"),
+    Case("import-dataset-start-frame-beyond", _import_with_dataset("zeroshot_chunk/f153", lambda ds: None, "--episode", "0"),
+         file="f153/meta.json", field="start frame 153 lies beyond episode 0 (150 frames)"),
     Case("import-dataset-unknown-version",
          _import_with_dataset(SC, lambda ds: edit_json(ds / "meta/info.json", codebase_version="v9.9"), "--episode", "0"),
          file="meta/info.json", field="codebase_version 'v9.9' is not supported"),
@@ -582,29 +586,29 @@ CASES: list[Case] = [
          file="session.json", field="gt_source.dataset: expected a path string"),
     Case("info-extra-keys-are-ignored",
          _session_cmd("info", "zs3", lambda s: (edit_json(s / "session.json", future_field={"x": 1}),
-                                                edit_json(s / F084 / "rollout.json", future_field=[1, 2])), "--json"),
-         rc=0, check=_rows(["f000", "f084", "f169"])),
+                                                edit_json(s / F076 / "rollout.json", future_field=[1, 2])), "--json"),
+         rc=0, check=_rows(["f000", "f076", "f153"])),
     Case("info-session-rollouts-is-a-file",
          _session_cmd("info", "zs3", lambda s: (shutil.rmtree(s / "rollouts"), (s / "rollouts").write_text("x"))),
          file="zs3/rollouts", field="expected a directory"),
     Case("info-empty-session-is-fine", _session_cmd("info", "zs3", lambda s: _mk_empty(s / "rollouts"), "--json"),
          rc=0, check=_rows([])),
     Case("info-one-bad-rollout-json-of-three",
-         _session_cmd("info", "zs3", lambda s: (s / F084 / "rollout.json").write_text("{{"), "--json"),
-         rc=0, check=_listed_error("f084", "f084/rollout.json", "invalid JSON")),
+         _session_cmd("info", "zs3", lambda s: (s / F076 / "rollout.json").write_text("{{"), "--json"),
+         rc=0, check=_listed_error("f076", "f076/rollout.json", "invalid JSON")),
     Case("info-one-rollout-duplicate-views",
-         _session_cmd("info", "zs3", lambda s: edit_json(s / F084 / "rollout.json", views=["front", "front"]), "--json"),
-         rc=0, check=_listed_error("f084", "f084/rollout.json", "views: listed twice")),
+         _session_cmd("info", "zs3", lambda s: edit_json(s / F076 / "rollout.json", views=["front", "front"]), "--json"),
+         rc=0, check=_listed_error("f076", "f076/rollout.json", "views: listed twice")),
     Case("info-one-rollout-negative-episode",
-         _session_cmd("info", "zs3", lambda s: edit_json(s / F084 / "rollout.json", episode_index=-1), "--json"),
-         rc=0, check=_listed_error("f084", "f084/rollout.json", "episode_index: must be >= 0")),
+         _session_cmd("info", "zs3", lambda s: edit_json(s / F076 / "rollout.json", episode_index=-1), "--json"),
+         rc=0, check=_listed_error("f076", "f076/rollout.json", "episode_index: must be >= 0")),
     Case("info-one-rollout-missing-video",
-         _session_cmd("info", "zs3", lambda s: (s / F084 / "video" / "top.mp4").unlink(), "--json"),
-         rc=0, check=_listed_error("f084", "f084/video/top.mp4", "imagined video for view 'top' not found")),
+         _session_cmd("info", "zs3", lambda s: (s / F076 / "video" / "gripper.mp4").unlink(), "--json"),
+         rc=0, check=_listed_error("f076", "f076/video/gripper.mp4", "imagined video for view 'gripper' not found")),
     Case("info-one-rollout-extra-states-rows",
-         _session_cmd("info", "zs3", _save(F084 + "/states.npy", np.zeros((5, 6))), "--json"),
-         rc=0, check=_listed_error("f084", "f084/states.npy", "shape: expected (2, 6), found (5, 6)")),
-    Case("info-rollout-path-joint-count", _info_rollout_path, file="f084/actions.npy",
+         _session_cmd("info", "zs3", _save(F076 + "/states.npy", np.zeros((5, 6))), "--json"),
+         rc=0, check=_listed_error("f076", "f076/states.npy", "shape: expected (2, 6), found (5, 6)")),
+    Case("info-rollout-path-joint-count", _info_rollout_path, file="f076/actions.npy",
          field="shape: expected (n_chunks, 24, 6), found (1, 24, 4)"),
     Case("info-missing-path", lambda ws, d: ["info", d / "nowhere"], file="nowhere", field="not found"),
     # ---------------------------------------------------------------- info: datasets
@@ -654,23 +658,23 @@ CASES: list[Case] = [
     Case("report-empty-session", _session_cmd("report", "zs3", lambda s: shutil.rmtree(s / "rollouts")),
          file="zs3", field="no rollouts to report"),
     Case("report-only-rollout-unknown-kind",
-         _session_cmd("report", "zs1", lambda s: edit_json(s / F084 / "rollout.json", kind="multi")),
-         file="f084/rollout.json", field="kind: expected one of"),
+         _session_cmd("report", "zs1", lambda s: edit_json(s / F076 / "rollout.json", kind="multi")),
+         file="f076/rollout.json", field="kind: expected one of"),
     Case("report-only-rollout-fps-huge-int",
-         _session_cmd("report", "zs1", lambda s: edit_json(s / F084 / "rollout.json", fps=10 ** 400)),
-         file="f084/rollout.json", field="fps: must be a finite number"),
+         _session_cmd("report", "zs1", lambda s: edit_json(s / F076 / "rollout.json", fps=10 ** 400)),
+         file="f076/rollout.json", field="fps: must be a finite number"),
     Case("report-only-rollout-json-huge-int",
-         _session_cmd("report", "zs1", lambda s: (s / F084 / "rollout.json").write_text(HUGE_INT_JSON)),
-         file="f084/rollout.json", field="invalid JSON"),
+         _session_cmd("report", "zs1", lambda s: (s / F076 / "rollout.json").write_text(HUGE_INT_JSON)),
+         file="f076/rollout.json", field="invalid JSON"),
     Case("report-only-rollout-empty-gt-actions",
-         _session_cmd("report", "zs1", _save(F084 + "/gt/actions.npy", np.zeros((0, 6)))),
-         file="f084/gt/actions.npy", field="no GT steps"),
+         _session_cmd("report", "zs1", _save(F076 + "/gt/actions.npy", np.zeros((0, 6)))),
+         file="f076/gt/actions.npy", field="no GT steps"),
     Case("report-absurd-1e300", _session_cmd("report", "zs1", lambda s: _scale_actions(s, 1e300)),
-         file="f084/actions.npy", field="absurd value 1e+300 at index [0, 0, 0]"),
-    Case("report-bad-rollout-path", _session_cmd("report", "zs3", lambda s: truncate(s / F084 / "actions.npy"),
-                                                 sub=F084),
-         file="f084/actions.npy", field="not a readable .npy"),
-    Case("report-raw-source-broken-leaves-no-temp", _raw_source_report, file="f084/meta.json",
+         file="f076/actions.npy", field="absurd value 1e+300 at index [0, 0, 0]"),
+    Case("report-bad-rollout-path", _session_cmd("report", "zs3", lambda s: truncate(s / F076 / "actions.npy"),
+                                                 sub=F076),
+         file="f076/actions.npy", field="not a readable .npy"),
+    Case("report-raw-source-broken-leaves-no-temp", _raw_source_report, file="f076/meta.json",
          field="actions_gt: shape (3, 6) differs"),
     Case("report-unknown-user-path", lambda ws, d: ["report", "~nosuchuser_inspector/x"],
          file="~nosuchuser_inspector/x", field="not found"),
@@ -678,34 +682,34 @@ CASES: list[Case] = [
          field="meta/info.json is missing"),
     # ---------------------------------------------------------------- report: one bad rollout of several
     Case("report-one-npy-truncated",
-         _session_cmd("report", "zs3", lambda s: truncate(s / F084 / "actions.npy"), "--json"), rc=0,
-         check=_ok_report_rows(["f000", "f169"], "/f084", "f084/actions.npy", "not a readable .npy")),
+         _session_cmd("report", "zs3", lambda s: truncate(s / F076 / "actions.npy"), "--json"), rc=0,
+         check=_ok_report_rows(["f000", "f153"], "/f076", "f076/actions.npy", "not a readable .npy")),
     Case("report-one-npy-inf",
-         _session_cmd("report", "zs3", _save(F084 + "/actions.npy", np.full((1, 24, 6), -np.inf)), "--json"), rc=0,
-         check=_ok_report_rows(["f000", "f169"], "/f084", "f084/actions.npy", "non-finite value -inf")),
+         _session_cmd("report", "zs3", _save(F076 + "/actions.npy", np.full((1, 24, 6), -np.inf)), "--json"), rc=0,
+         check=_ok_report_rows(["f000", "f153"], "/f076", "f076/actions.npy", "non-finite value -inf")),
     Case("report-one-rollout-missing-kind",
-         _session_cmd("report", "zs3", lambda s: drop_json_key(s / F084 / "rollout.json", "kind"), "--json"), rc=0,
-         check=_ok_report_rows(["f000", "f169"], "/f084", "f084/rollout.json", "missing field 'kind'")),
+         _session_cmd("report", "zs3", lambda s: drop_json_key(s / F076 / "rollout.json", "kind"), "--json"), rc=0,
+         check=_ok_report_rows(["f000", "f153"], "/f076", "f076/rollout.json", "missing field 'kind'")),
     Case("report-one-bad-table-output",
-         _session_cmd("report", "zs3", lambda s: (s / F084 / "actions.npy").write_bytes(b"")), rc=0,
+         _session_cmd("report", "zs3", lambda s: (s / F076 / "actions.npy").write_bytes(b"")), rc=0,
          check=_check_table_lists_error),
     Case("report-one-npy-big-endian-float16-is-fine",
-         _session_cmd("report", "zs3", lambda s: np.save(s / F084 / "actions.npy",
-                                                         np.load(s / F084 / "actions.npy").astype(">f2")), "--json"),
-         rc=0, check=_rows(["f000", "f084", "f169"])),
+         _session_cmd("report", "zs3", lambda s: np.save(s / F076 / "actions.npy",
+                                                         np.load(s / F076 / "actions.npy").astype(">f2")), "--json"),
+         rc=0, check=_rows(["f000", "f076", "f153"])),
     Case("report-one-single-chunk-with-two-chunks",
-         _session_cmd("report", "zs3", lambda s: np.save(s / F084 / "actions.npy", np.zeros((2, 24, 6))), "--json"),
-         rc=0, check=_ok_report_rows(["f000", "f169"], "/f084", "f084/actions.npy", "expected 1 chunk, found 2")),
+         _session_cmd("report", "zs3", lambda s: np.save(s / F076 / "actions.npy", np.zeros((2, 24, 6))), "--json"),
+         rc=0, check=_ok_report_rows(["f000", "f153"], "/f076", "f076/actions.npy", "expected 1 chunk, found 2")),
     Case("report-one-video-corrupt",
-         _session_cmd("report", "zs3", lambda s: corrupt_middle(s / F084 / "video" / "front.mp4"), "--json"), rc=0,
-         check=_ok_report_rows(["f000", "f169"], "/f084", "f084/video/front.mp4", "cannot decode video")),
+         _session_cmd("report", "zs3", lambda s: corrupt_middle(s / F076 / "video" / "front.mp4"), "--json"), rc=0,
+         check=_ok_report_rows(["f000", "f153"], "/f076", "f076/video/front.mp4", "cannot decode video")),
     Case("report-one-gt-video-truncated",
-         _session_cmd("report", "zs3", lambda s: truncate(s / F084 / "gt" / "video" / "gripper.mp4"), "--json"), rc=0,
-         check=_ok_report_rows(["f000", "f169"], "/f084", "f084/gt/video/gripper.mp4", "cannot")),
+         _session_cmd("report", "zs3", lambda s: truncate(s / F076 / "gt" / "video" / "gripper.mp4"), "--json"), rc=0,
+         check=_ok_report_rows(["f000", "f153"], "/f076", "f076/gt/video/gripper.mp4", "cannot")),
     Case("report-absurd-1e30-still-reports", _session_cmd("report", "zs1", lambda s: _scale_actions(s, 1e30), "--json"),
          rc=0, check=_check_absurd_1e30),
     # a session named twice is one session: its rollouts are reported once
-    Case("report-same-session-twice", _same_session_twice, rc=0, check=_rows(["f084"])),
+    Case("report-same-session-twice", _same_session_twice, rc=0, check=_rows(["f076"])),
     # ---------------------------------------------------------------- report: GT from a dataset
     # an episode the dataset lacks: the rollout is still reported (no GT), and a warning says why
     Case("report-dataset-episode-beyond",
@@ -736,20 +740,20 @@ CASES: list[Case] = [
     # ---------------------------------------------------------------- export
     Case("export-session-invalid-json", _export_cmd("zs1", lambda s: (s / "session.json").write_text("[")),
          file="session.json", field="invalid JSON"),
-    Case("export-only-rollout-npy-nan", _export_cmd("zs1", _save(F084 + "/actions.npy", np.full((1, 24, 6), np.nan))),
-         file="f084/actions.npy", field="non-finite"),
-    Case("export-video-corrupt", _export_cmd("zs1", lambda s: corrupt_middle(s / F084 / "video" / "front.mp4"),
-                                             "--rollout", "f084"),
-         file="f084/video/front.mp4", field="cannot decode video"),
+    Case("export-only-rollout-npy-nan", _export_cmd("zs1", _save(F076 + "/actions.npy", np.full((1, 24, 6), np.nan))),
+         file="f076/actions.npy", field="non-finite"),
+    Case("export-video-corrupt", _export_cmd("zs1", lambda s: corrupt_middle(s / F076 / "video" / "front.mp4"),
+                                             "--rollout", "f076"),
+         file="f076/video/front.mp4", field="cannot decode video"),
     Case("export-empty-session", _export_cmd("zs3", lambda s: _mk_empty(s / "rollouts")),
          file="zs3", field="no rollouts to export"),
-    Case("export-empty-gt-actions", _export_cmd("zs1", _save(F084 + "/gt/actions.npy", np.zeros((0, 6))),
-                                                "--rollout", "f084"),
-         file="f084/gt/actions.npy", field="no GT steps"),
+    Case("export-empty-gt-actions", _export_cmd("zs1", _save(F076 + "/gt/actions.npy", np.zeros((0, 6))),
+                                                "--rollout", "f076"),
+         file="f076/gt/actions.npy", field="no GT steps"),
     Case("export-absurd-1e300", _export_cmd("zs1", lambda s: _scale_actions(s, 1e300)),
-         file="f084/actions.npy", field="absurd value"),
-    Case("export-one-bad-of-three", _export_cmd("zs3", lambda s: (s / F084 / "rollout.json").write_text("{"), out=""),
-         file="f084/rollout.json", field="invalid JSON", out=("f000.rrd", "f169.rrd")),
+         file="f076/actions.npy", field="absurd value"),
+    Case("export-one-bad-of-three", _export_cmd("zs3", lambda s: (s / F076 / "rollout.json").write_text("{"), out=""),
+         file="f076/rollout.json", field="invalid JSON", out=("f000.rrd", "f153.rrd")),
 ]
 
 
@@ -758,8 +762,8 @@ CASES: list[Case] = [
 
 
 @pytest.fixture(scope="module")
-def ws(fixtures_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Workspace:
-    return Workspace(tmp_path_factory.mktemp("malformed"), fixtures_dir)
+def ws(dz_layout: Path, lerobot_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Workspace:
+    return Workspace(tmp_path_factory.mktemp("malformed"), dz_layout, lerobot_dir)
 
 
 def _run_case(case: Case, ws: Workspace) -> Run:
@@ -845,13 +849,13 @@ def test_app_catalog_broken_rollouts_are_errors(ws: Workspace, tmp_path: Path) -
     from inspector.data.sources import open_sources
 
     zs3 = ws.session(tmp_path / "a", "zs3")
-    np.save(zs3 / F084 / "actions.npy", np.full((1, 24, 6), np.nan))  # fails on open
-    edit_json(zs3 / "rollouts/f169/rollout.json", views=["front", "front"])  # fails on open
+    np.save(zs3 / F076 / "actions.npy", np.full((1, 24, 6), np.nan))  # fails on open
+    edit_json(zs3 / "rollouts/f153/rollout.json", views=["front", "front"])  # fails on open
     ds = ws.ds_session(tmp_path / "b")
     edit_json(ds / "rollouts/r0/rollout.json", start_frame=500)  # fails when its timeline is built
     edit_json(ds / "rollouts/r1/rollout.json", episode_index=9)  # likewise
     zs1 = ws.session(tmp_path / "c", "zs1")
-    corrupt_middle(zs1 / F084 / "video" / "front.mp4")  # loads; its view shows an error
+    corrupt_middle(zs1 / F076 / "video" / "front.mp4")  # loads; its view shows an error
     empty = ws.session(tmp_path / "d", "zs3")
     _mk_empty(empty / "rollouts")
     edit_json(empty / "session.json", name="empty")
@@ -860,17 +864,17 @@ def test_app_catalog_broken_rollouts_are_errors(ws: Workspace, tmp_path: Path) -
     try:
         with ThreadPoolExecutor(2) as pool:
             catalog = catalog_module.Catalog(sources, pool, joint_child_links())
-            assert sorted(catalog.keys()) == ["ds / r0", "ds / r1", "zs1 / f084", "zs3 / f000",
-                                              "zs3 / f084", "zs3 / f169"]
+            assert sorted(catalog.keys()) == ["ds / r0", "ds / r1", "zs1 / f076", "zs3 / f000",
+                                              "zs3 / f076", "zs3 / f153"]
             failed: dict[str, str] = {}
             for key in catalog.entries:
                 try:
                     catalog.load(key)
                 except InspectorError as exc:  # anything else would escape and fail the test
                     failed[key] = str(exc)
-            assert sorted(failed) == ["ds / r0", "zs3 / f084", "zs3 / f169"]
-            assert "f084/actions.npy" in failed["zs3 / f084"] and "non-finite" in failed["zs3 / f084"]
-            assert "views: listed twice" in failed["zs3 / f169"]
+            assert sorted(failed) == ["ds / r0", "zs3 / f076", "zs3 / f153"]
+            assert "f076/actions.npy" in failed["zs3 / f076"] and "non-finite" in failed["zs3 / f076"]
+            assert "views: listed twice" in failed["zs3 / f153"]
             assert "start_frame 500" in failed["ds / r0"]
             no_episode = catalog.load("ds / r1").timeline
             assert not no_episode.has_gt_joints and "no episode 9" in no_episode.gt.warning
@@ -879,10 +883,10 @@ def test_app_catalog_broken_rollouts_are_errors(ws: Workspace, tmp_path: Path) -
             with pytest.raises(InspectorError):
                 catalog.load("ds / r0")
             # the corrupt video fails alone: the rollout opens, that view carries the error
-            loaded = catalog.load("zs1 / f084")
+            loaded = catalog.load("zs1 / f076")
             assert loaded.frames.decoded.wait(60)  # every view settled: shown, or its error
             assert "front.mp4" in loaded.frames.status["front"] and "\n" not in loaded.frames.status["front"]
-            assert loaded.frames.status["gripper"] == READY and loaded.frames.status["top"] == READY
+            assert loaded.frames.status["gripper"] == READY
             assert catalog.load("zs3 / f000").timeline.has_gt_joints
     finally:
         sources.close()

@@ -163,7 +163,7 @@ def _array_bytes(shape: tuple[int, ...], values: st.SearchStrategy[float]) -> st
     return st.lists(values, min_size=n, max_size=n).map(lambda v: save(np.array(v, np.float64).reshape(shape)))
 
 
-_V30 = Path(__file__).resolve().parents[2] / "shared" / "fixtures" / "lerobot" / "so101_v30"  # as conftest.py
+_V30 = Path(__file__).resolve().parent / "data" / "lerobot" / "so101_v30"  # written by LeRobot
 _joint_values = st.floats(-300, 300) | st.sampled_from([0.0, 1e30, -1e99, 1e100])
 # A valid rollout of 2 autoregressive chunks of horizon 4, in all the ways a valid one may vary.
 _VALID_ROLLOUT = st.fixed_dictionaries({
@@ -204,7 +204,6 @@ def test_rollout_property(broken: str, data: st.DataObject, twin: bool, with_dat
              "states": data.draw(st.none() | _VALID_NPY["states"], "states")}
     if broken != "nothing":
         files[broken] = data.draw(_FUZZ[broken], f"broken {broken}")
-    # without the shared fixtures the named dataset is simply missing: no dataset GT, still a valid case
     gt_source = {"dataset": str(_V30)} if with_dataset else {}
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp) / "s"

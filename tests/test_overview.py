@@ -4,7 +4,7 @@ Rows are computed once per app from the report machinery and its metrics cache; 
 drawn by plain functions (checked here without a browser) and shown in a real browser (Debian
 Chromium driven by Playwright). The browser tests serve the bundled demo beside a copy of it
 ("checkpoint_b") whose ``prompt_train`` and ``single_f000`` predictions are planted 3 deg off
-(B must lose those two and tie the rest), and the shared DreamZero fixtures with a broken rollout.
+(B must lose those two and tie the rest), and the app tests' copy of the demo with a broken rollout.
 Set ``INSPECTOR_DOCS_SCREENSHOT=1`` to also refresh ``docs/overview.png`` (the demo alone).
 """
 
@@ -280,19 +280,19 @@ def test_compare_with_a_session_shows_the_planted_winners_and_drift_figures(brow
 
 @pytest.mark.browser
 @pytest.mark.slow
-def test_fixture_rollouts_are_listed_with_the_broken_one_as_an_error_row(browser, fixtures_dir, tmp_path_factory):
-    from test_app import make_sessions
+def test_rollouts_are_listed_with_the_broken_one_as_an_error_row(browser, tmp_path_factory):
+    from test_app import BROKEN, make_sessions
 
-    _, broken = make_sessions(fixtures_dir, tmp_path_factory.mktemp("overview-fixtures"))
+    _, broken = make_sessions(tmp_path_factory.mktemp("overview-broken"))
     app = serve([broken], port=0, block=False)
     try:
         page, tab = _open(browser, app)
         keys = _table_keys(page)
         assert sorted(keys) == sorted(app.catalog.keys())
-        error_row = page.locator("tr.error", has_text="f000")
+        error_row = page.locator("tr.error", has_text=BROKEN)
         assert error_row.count() == 1 and "actions.npy" in error_row.inner_text()
         per_step = page.locator(".inspector-overview figure#per-step-rmse svg.chart path.ln")
-        assert per_step.count() >= 2  # the zero-shot samples and their mean
+        assert per_step.count() >= 2  # the single-chunk samples and their mean
         select_option(page, "Sort by", "RMSE")
         wait_until(lambda: _numbers(_cells(page, "rmse")) == sorted(_numbers(_cells(page, "rmse"))),
                    what="rows ordered by RMSE")

@@ -81,9 +81,9 @@ def broken_demo(tmp_path: Path) -> Path:
 # The command line, each run with its own Ray (before this module's shared instance starts)
 
 
-def test_report_json_on_ray_is_the_local_report(imported_session, tmp_path):
+def test_report_json_on_ray_is_the_local_report(tmp_path):
     before = ray_processes()
-    paths = [imported_session]
+    paths = [DEMO]
     local = inspector("report", *paths, "--json", "--jobs", "2", cache_dir=tmp_path / "cache-local")
     assert local.returncode == 0, local.stderr
     on_ray = inspector("report", *paths, "--json", "--ray", "--jobs", "2", cache_dir=tmp_path / "cache-ray")
@@ -91,7 +91,7 @@ def test_report_json_on_ray_is_the_local_report(imported_session, tmp_path):
     assert "inspector: Ray at local, 2 CPU(s)" in on_ray.stderr
     assert json.loads(on_ray.stdout) == json.loads(local.stdout)
     report = json.loads(on_ray.stdout)
-    assert len(report["rollouts"]) == 6 and report["prompt_divergence"]  # every fixture, the prompt pair
+    assert len(report["rollouts"]) == 13 and report["prompt_divergence"]  # every demo rollout, the prompt pair
     assert not wait_gone(ray_processes() - before), "Ray processes outlived the command"
 
 

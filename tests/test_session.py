@@ -123,15 +123,45 @@ def test_importer_reads_every_fixture_dir(imported_session):
     assert 15 < float(np.mean(psnr)) < 22  # a mosaic read as GT would score 4-10 dB
 
 
+def test_importer_reads_the_layout_made_from_the_demo(dz_layout_session):
+    """Every kind of DreamZero-SO101 source directory (``dreamzero_layout.py``): autoregressive,
+    single chunk with per-view clips, mosaic sample."""
+    s = open_session(dz_layout_session)
+    assert not s.errors
+    assert sorted(s.rollouts) == ["ep000_train", "f000", "f076", "f153", "train_ep0"]
+    train = s.rollouts["ep000_train"]
+    assert train.kind == "autoregressive" and train.actions.shape == (60, 24, 6)
+    assert train.views == ["front", "gripper"] and train.gt_views == ["front", "gripper"]
+    assert train.extra["chained_states"] is True  # state_trace[k+1] == action_trace[k][8]
+    np.testing.assert_array_equal(train.states[1:], train.actions[:, 8])
+    assert train.executed_actions().shape == (540, 6) and train.gt_actions is None
+    assert train.gt_episode_length == 409 and train.prompt == "Pick the red cube and place it in the bowl"
+    f076 = s.rollouts["f076"]
+    assert f076.kind == "single_chunk" and f076.start_frame == 76 and f076.gt_actions.shape == (24, 6)
+    assert f076.views == ["front", "gripper"] and f076.gt_views == ["front", "gripper"]
+    mosaic = s.rollouts["train_ep0"]  # the 2x2 mosaic cut into views; gt_future.mp4: the front alone
+    assert mosaic.views == ["front", "gripper", "top"] and mosaic.gt_views == ["front"]
+    assert mosaic.extra["source"]["name"] == "train_ep0"
+    from inspector.analysis.timeline import build_timeline
+
+    # the cut front quarter is the imagined front clip: against its GT it scores as the clip does
+    psnr = build_timeline(mosaic).video_metrics("front").psnr_db
+    clip = build_timeline(s.rollouts["f000"]).video_metrics("front").psnr_db
+    assert len(psnr) == len(mosaic.video("front")) == 9 and np.isfinite(psnr).all()
+    np.testing.assert_allclose(psnr, clip, atol=1.5)
+
+
 def _cli(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "inspector", *args], capture_output=True, text=True, timeout=300)
 
 
-def test_cli_import_prints_one_line_per_rollout(dreamzero_dir, tmp_path):
-    out = _cli("import", "dreamzero-so101", str(dreamzero_dir / "train_rollout"), "-o", str(tmp_path / "s"))
+def test_cli_import_prints_one_line_per_rollout(dz_layout, tmp_path):
+    out = _cli("import", "dreamzero-so101", str(dz_layout), "-o", str(tmp_path / "s"))
     assert out.returncode == 0, out.stderr
-    lines = [line for line in out.stdout.splitlines() if line.startswith("ep000_")]
-    assert len(lines) == 2 and "60 chunk(s) x 24 steps" in lines[0]
+    lines = out.stdout.splitlines()
+    assert sorted(line.split(":")[0] for line in lines[:-1]) == ["ep000_train", "f000", "f076", "f153", "train_ep0"]
+    assert lines[-1] == f"wrote session {tmp_path / 's'}"
+    assert "60 chunk(s) x 24 steps" in next(line for line in lines if line.startswith("ep000_train:"))
 
 
 def test_cli_bad_input_is_one_line_exit_2(tmp_path):
@@ -141,28 +171,28 @@ def test_cli_bad_input_is_one_line_exit_2(tmp_path):
     assert not (tmp_path / "s").exists()
 
 
-def test_failed_import_leaves_no_partial_session(dreamzero_dir, tmp_path):
+def test_failed_import_leaves_no_partial_session(dz_layout, tmp_path):
     src = tmp_path / "src"
     import shutil
-    shutil.copytree(dreamzero_dir / "zeroshot_chunk", src)
-    meta = json.loads((src / "f169" / "meta.json").read_text())
+    shutil.copytree(dz_layout / "zeroshot_chunk", src)
+    meta = json.loads((src / "f153" / "meta.json").read_text())
     meta["actions_pred"] = meta["actions_pred"][:3] + [[1, 2, 3]]
-    (src / "f169" / "meta.json").write_text(json.dumps(meta))
+    (src / "f153" / "meta.json").write_text(json.dumps(meta))
     out = _cli("import", "dreamzero-so101", str(src), "-o", str(tmp_path / "s"))
-    assert out.returncode == 2 and "f169/meta.json" in out.stderr and "actions_pred" in out.stderr
+    assert out.returncode == 2 and "f153/meta.json" in out.stderr and "actions_pred" in out.stderr
     assert not (tmp_path / "s").exists() and not list(tmp_path.glob(".s.*"))
 
 
-def test_cli_info_json_session_and_dataset(imported_session, fixtures_dir):
-    out = _cli("info", str(imported_session), "--json")
+def test_cli_info_json_session_and_dataset(dz_layout_session, lerobot_dir):
+    out = _cli("info", str(dz_layout_session), "--json")
     info = json.loads(out.stdout)
     assert info["format"] == "session"
     by_tag = {r["tag"]: r for r in info["rollouts"]}
     assert by_tag["ep000_train"] == {"tag": "ep000_train", "kind": "autoregressive", "n_chunks": 60, "horizon": 24,
-                                     "executed_per_chunk": 9, "views": ["front", "gripper", "top"],
+                                     "executed_per_chunk": 9, "views": ["front", "gripper"],
                                      "has_gt_joints": False}
-    assert by_tag["f084"]["has_gt_joints"] is True
-    info = json.loads(_cli("info", str(fixtures_dir / "lerobot" / "so101_v30"), "--json").stdout)
+    assert by_tag["f076"]["has_gt_joints"] is True
+    info = json.loads(_cli("info", str(lerobot_dir / "so101_v30"), "--json").stdout)
     assert info["format"] == "lerobot" and info["codebase_version"] == "v3.0" and info["fps"] == 30
     assert info["cameras"] == ["front", "wrist"] and info["robot_type"] == "so101_follower"
     assert [e["length"] for e in info["episodes"]] == [150, 210, 240]
@@ -245,10 +275,10 @@ def test_rollout_overwrite_replaces_only_a_rollout(tmp_path):
     assert not [p for p in (root / "rollouts").iterdir() if p.name.startswith(".")]
 
 
-def test_concurrent_imports_to_one_destination_leave_no_staging(dreamzero_dir, tmp_path):
+def test_concurrent_imports_to_one_destination_leave_no_staging(dz_layout, tmp_path):
     """Imports racing to one destination: one session results (complete), every other import
     exits 2 with one line, and no ``.<name>.*.partial`` staging directory (or ``.old-``) is left."""
-    src = dreamzero_dir / "zeroshot_chunk" / "f084"
+    src = dz_layout / "zeroshot_chunk" / "f076"
     dest = tmp_path / "out" / "s"
     for extra in ([], ["--overwrite"]):
         procs = [subprocess.Popen([sys.executable, "-m", "inspector", "import", "dreamzero-so101", str(src),
@@ -267,7 +297,7 @@ def test_concurrent_imports_to_one_destination_leave_no_staging(dreamzero_dir, t
             assert len(ok) == 1, results  # without --overwrite only the first one in lands
         assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["s"]
         s = open_session(dest)
-        assert sorted(s.rollouts) == ["f084"] and not s.errors
+        assert sorted(s.rollouts) == ["f076"] and not s.errors
 
 
 def test_commit_that_loses_the_race_leaves_nothing(tmp_path):
