@@ -146,7 +146,7 @@ def _close_pages_left_open(request: pytest.FixtureRequest):
     its own ``page.close()``, and its page keeps drawing software WebGL at full CPU, starving the
     rerun and the tests after it."""
     yield
-    browser = getattr(request.node, "funcargs", {}).get("browser")  # only one that was set up
+    browser = (getattr(request.node, "funcargs", None) or {}).get("browser")  # only one that was set up
     for context in list(browser.contexts) if browser is not None else []:
         with contextlib.suppress(Exception):  # already closed, or the browser is gone
             context.close()
