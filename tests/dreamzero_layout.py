@@ -81,14 +81,18 @@ def write_dreamzero_layout(dest: Path, demo: Path = DEMO) -> Path:
         encode_h264(d / f"gt_{view}.mp4", (rgb for _, rgb in ep.clip_from(camera, 0).iter_frames()), ep.fps,
                     preset="veryfast")
 
-    # -- single chunks, each with its GT joints and GT video from the dataset
-    for tag, source in SINGLE.items():
+    def sample(source: str, d: Path):
+        """A single-chunk rollout's folder made at ``d``: the rollout, its episode, the folder, its
+        predicted chunk and the GT actions of the same steps."""
         r = session.rollouts[source]
         ep = episode(r.episode_index)
-        d = dest / "zeroshot_chunk" / tag
         d.mkdir(parents=True)
         pred = np.load(r.root / "actions.npy")[0]
-        gt = ep.action[r.start_frame:r.start_frame + pred.shape[0]]
+        return r, ep, d, pred, ep.action[r.start_frame:r.start_frame + pred.shape[0]]
+
+    # -- single chunks, each with its GT joints and GT video from the dataset
+    for tag, source in SINGLE.items():
+        r, ep, d, pred, gt = sample(source, dest / "zeroshot_chunk" / tag)
         _write_json(d / "meta.json", {
             "tag": tag, "frame_in_ep": r.start_frame, "t_wall_s": r.start_frame / ep.fps,
             "actions_pred": pred.tolist(), "actions_gt": gt.tolist(),
@@ -99,12 +103,7 @@ def write_dreamzero_layout(dest: Path, demo: Path = DEMO) -> Path:
             encode_h264(d / f"gt_{view}.mp4", _gt_frames(ep, camera, r.start_frame), ep.fps)
 
     # -- a mosaic sample
-    r = session.rollouts[MOSAIC_SOURCE]
-    ep = episode(r.episode_index)
-    d = dest / "demo" / MOSAIC_TAG
-    d.mkdir(parents=True)
-    pred = np.load(r.root / "actions.npy")[0]
-    gt = ep.action[r.start_frame:r.start_frame + pred.shape[0]]
+    r, ep, d, pred, gt = sample(MOSAIC_SOURCE, dest / "demo" / MOSAIC_TAG)
     front, _ = decode(r.root / "video" / "front.mp4")
     gripper, _ = decode(r.root / "video" / "wrist.mp4")
     black = np.zeros_like(front)
