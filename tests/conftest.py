@@ -140,9 +140,35 @@ def dz_layout_session(dz_layout: Path, tmp_path_factory: pytest.TempPathFactory)
     return import_dreamzero(dz_layout, tmp_path_factory.mktemp("dz-layout-session") / "dz", log=lambda _: None)
 
 
+@pytest.fixture(scope="session")
+def playwright():
+    """Playwright, started once for the whole run: its sync API allows one instance per thread, so
+    a test that needs a browser of its own launches it from this one (``browser.launch``)."""
+    from browser import skip_reason
+
+    if (reason := skip_reason()) is not None:
+        pytest.skip(reason)
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        yield p
+
+
+@pytest.fixture(scope="session")
+def browser(playwright):
+    """One headless Debian Chromium for the whole run (launching one costs seconds, and its first
+    page compiles the app's scripts): every test opens its own pages, each in a fresh context
+    (``browser.open_page``), and closes them; ``_close_pages_left_open`` closes what a failed test left."""
+    from browser import launch
+
+    b = launch(playwright)
+    yield b
+    b.close()
+
+
 @pytest.fixture(autouse=True)
 def _close_pages_left_open(request: pytest.FixtureRequest):
-    """Close the pages a test left open in its module's ``browser``: one that fails midway skips
+    """Close the pages a test left open in the shared ``browser``: one that fails midway skips
     its own ``page.close()``, and its page keeps drawing software WebGL at full CPU, starving the
     rerun and the tests after it."""
     yield

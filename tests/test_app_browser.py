@@ -20,7 +20,6 @@ from browser import (
     canvas_is_drawn,
     frame_sources,
     hide_software_webgl_notice,
-    launch,
     open_app,
     open_page,
     page_client_id,
@@ -49,16 +48,6 @@ def app(tmp_path_factory):
     app = serve([broken], port=0, block=False)
     yield app
     app.stop()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = launch(p)
-        yield b
-        b.close()
 
 
 def new_page(browser, app, width: int = 1600, height: int = 1000):

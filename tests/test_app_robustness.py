@@ -48,7 +48,7 @@ from test_app import (  # noqa: F401  (app and sessions are fixtures)
     key,
     sessions,
 )
-from test_app_browser import browser, open_in_page, page_tab  # noqa: F401  (browser is a fixture)
+from test_app_browser import open_in_page, page_tab
 
 from inspector.app import HeadlessClient, serve
 from inspector.app._annotations import read_annotations, update_annotation

@@ -282,7 +282,7 @@ def test_find_dataset_refuses_a_directory_without_info(tmp_path):
 
 @pytest.mark.browser
 @pytest.mark.slow
-def test_episode_view_in_chromium(v30, tmp_path):
+def test_episode_view_in_chromium(v30, tmp_path, browser):
     """Pick an episode in Debian Chromium: its cameras, both arms' card and plots, and the frame
     slider moving the camera frames."""
     sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -290,49 +290,40 @@ def test_episode_view_in_chromium(v30, tmp_path):
         canvas_is_drawn,
         frame_sources,
         hide_software_webgl_notice,
-        launch,
         open_app,
         page_client_id,
         select_option,
-        skip_reason,
         slider_thumb,
         wait_until,
     )
-
-    reason = skip_reason()
-    if reason:
-        pytest.skip(reason)
-    from playwright.sync_api import sync_playwright
 
     from inspector.app import serve
 
     app = serve([str(v30)], port=0, block=False)
     try:
-        with sync_playwright() as p:
-            browser = launch(p)
-            page = browser.new_page(viewport={"width": 1600, "height": 1000})
-            open_app(page, app.url)
-            hide_software_webgl_notice(page)
-            tab = wait_until(lambda: app.tabs.get(page_client_id(page)), what="the page's tab")
-            key = next(k for k in app.catalog.keys() if k.startswith("so101_v30 / episode 2 "))
-            select_option(page, "Rollout", key)
-            wait_until(lambda: tab.key == key and tab.loaded is not None, what="episode 2 to open")
-            wait_until(lambda: set(frame_sources(page)) == {"front/gt", "wrist/gt"}, timeout=60,
-                       what="both cameras' frames in the page")
-            # the card may follow the frames on a busy machine: wait for it (raises if it never shows)
-            for text in ("commanded arm (action)", "Put the red cube on top of the blue cube"):
-                page.get_by_text(text).first.wait_for(state="visible", timeout=60_000)
-            before = frame_sources(page)["front/gt"]
-            thumb = slider_thumb(page, "Frame")
-            thumb.focus()
-            for _ in range(5):
-                page.keyboard.press("ArrowRight")
-            wait_until(lambda: tab.step == 5, what="the frame slider to move the tab")
-            wait_until(lambda: frame_sources(page)["front/gt"] != before, what="the camera frame to change")
-            page.wait_for_timeout(2000)
-            shot = tmp_path / "episode.png"
-            page.screenshot(path=str(shot))
-            assert canvas_is_drawn(shot.read_bytes(), (420, 120, 960, 900))
-            browser.close()
+        page = browser.new_page(viewport={"width": 1600, "height": 1000})
+        open_app(page, app.url)
+        hide_software_webgl_notice(page)
+        tab = wait_until(lambda: app.tabs.get(page_client_id(page)), what="the page's tab")
+        key = next(k for k in app.catalog.keys() if k.startswith("so101_v30 / episode 2 "))
+        select_option(page, "Rollout", key)
+        wait_until(lambda: tab.key == key and tab.loaded is not None, what="episode 2 to open")
+        wait_until(lambda: set(frame_sources(page)) == {"front/gt", "wrist/gt"}, timeout=60,
+                   what="both cameras' frames in the page")
+        # the card may follow the frames on a busy machine: wait for it (raises if it never shows)
+        for text in ("commanded arm (action)", "Put the red cube on top of the blue cube"):
+            page.get_by_text(text).first.wait_for(state="visible", timeout=60_000)
+        before = frame_sources(page)["front/gt"]
+        thumb = slider_thumb(page, "Frame")
+        thumb.focus()
+        for _ in range(5):
+            page.keyboard.press("ArrowRight")
+        wait_until(lambda: tab.step == 5, what="the frame slider to move the tab")
+        wait_until(lambda: frame_sources(page)["front/gt"] != before, what="the camera frame to change")
+        page.wait_for_timeout(2000)
+        shot = tmp_path / "episode.png"
+        page.screenshot(path=str(shot))
+        assert canvas_is_drawn(shot.read_bytes(), (420, 120, 960, 900))
+        page.close()
     finally:
         app.stop()

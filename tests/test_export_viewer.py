@@ -130,7 +130,7 @@ def _arm_pixels(png: bytes) -> tuple[int, int, tuple[float, float]]:
 
 @pytest.mark.slow
 @pytest.mark.browser
-def test_web_viewer_draws_both_arms(viewer_recording, tmp_path):
+def test_web_viewer_draws_both_arms(viewer_recording, tmp_path, playwright):
     """Open an exported recording in Rerun's web viewer (``rerun --serve-web``, loopback only) in
     Debian Chromium, WebGL2 rendered by SwiftShader, and look at the 3D view: the opaque yellow
     GT arm and the translucent blue prediction must both be drawn (an arm whose URDF root is not
@@ -139,11 +139,7 @@ def test_web_viewer_draws_both_arms(viewer_recording, tmp_path):
     heuristics, with side panels open). The last screenshot is kept as ``<tmp_path>/viewer.png``."""
     import urllib.request
 
-    from browser import PAGE_TIMEOUT_S, SWIFTSHADER_ARGS, launch, skip_reason, wait_until
-
-    if (reason := skip_reason()) is not None:
-        pytest.skip(reason)
-    from playwright.sync_api import sync_playwright
+    from browser import PAGE_TIMEOUT_S, SWIFTSHADER_ARGS, launch, wait_until
 
     web_port, grpc_port = _free_port(), _free_port()
     log = tmp_path / "rerun.log"
@@ -163,38 +159,37 @@ def test_web_viewer_draws_both_arms(viewer_recording, tmp_path):
                 return False
 
         wait_until(web_viewer_answers, timeout=120, interval=0.5, what="rerun's web viewer to answer")
-        with sync_playwright() as pw:
-            browser = launch(pw, SWIFTSHADER_ARGS)
+        browser = launch(playwright, SWIFTSHADER_ARGS)  # its own: WebGL2 needs SwiftShader
+        try:
+            page = browser.new_page(viewport={"width": 1280, "height": 800})
+            if not page.evaluate("() => !!document.createElement('canvas').getContext('webgl2')"):
+                pytest.skip("Chromium has no WebGL2, even with SwiftShader (--use-angle=swiftshader)")
+            grpc = f"rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc_port}%2Fproxy"
+            page.goto(f"http://127.0.0.1:{web_port}/?url={grpc}")
+            page.wait_for_selector("canvas", timeout=PAGE_TIMEOUT_S * 1000)
+            shot = tmp_path / "viewer.png"
+            found: tuple = (0, 0, None)
+
+            def both_arms_drawn() -> bool:
+                nonlocal found
+                # Software WebGL on a busy machine: one frame may take many seconds.
+                png = page.screenshot(timeout=180_000)
+                shot.write_bytes(png)
+                found = _arm_pixels(png)
+                return found[0] > 1500 and found[1] > 800
+
             try:
-                page = browser.new_page(viewport={"width": 1280, "height": 800})
-                if not page.evaluate("() => !!document.createElement('canvas').getContext('webgl2')"):
-                    pytest.skip("Chromium has no WebGL2, even with SwiftShader (--use-angle=swiftshader)")
-                grpc = f"rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc_port}%2Fproxy"
-                page.goto(f"http://127.0.0.1:{web_port}/?url={grpc}")
-                page.wait_for_selector("canvas", timeout=PAGE_TIMEOUT_S * 1000)
-                shot = tmp_path / "viewer.png"
-                found: tuple = (0, 0, None)
-
-                def both_arms_drawn() -> bool:
-                    nonlocal found
-                    # Software WebGL on a busy machine: one frame may take many seconds.
-                    png = page.screenshot(timeout=180_000)
-                    shot.write_bytes(png)
-                    found = _arm_pixels(png)
-                    return found[0] > 1500 and found[1] > 800
-
-                try:
-                    wait_until(both_arms_drawn, timeout=420, interval=2.0, what="both arms in the 3D view")
-                except AssertionError as exc:
-                    raise AssertionError(f"{exc}; last (yellow, blue, centre): {found}; see {shot}") from None
-                yellow, blue, (x, y) = found
-                assert x < 0.5 and y < 0.5, f"the arms are not in the layout's 3D view (top left): {found}, see {shot}"
-                if os.environ.get("INSPECTOR_DOCS_SCREENSHOT"):
-                    page.wait_for_timeout(5000)  # the video panels, decoded after the arms
-                    DOCS_VIEWER.parent.mkdir(exist_ok=True)
-                    DOCS_VIEWER.write_bytes(page.screenshot(timeout=180_000))
-            finally:
-                browser.close()
+                wait_until(both_arms_drawn, timeout=420, interval=2.0, what="both arms in the 3D view")
+            except AssertionError as exc:
+                raise AssertionError(f"{exc}; last (yellow, blue, centre): {found}; see {shot}") from None
+            yellow, blue, (x, y) = found
+            assert x < 0.5 and y < 0.5, f"the arms are not in the layout's 3D view (top left): {found}, see {shot}"
+            if os.environ.get("INSPECTOR_DOCS_SCREENSHOT"):
+                page.wait_for_timeout(5000)  # the video panels, decoded after the arms
+                DOCS_VIEWER.parent.mkdir(exist_ok=True)
+                DOCS_VIEWER.write_bytes(page.screenshot(timeout=180_000))
+        finally:
+            browser.close()
     finally:
         _stop_group(viewer)
     assert not _listening_on(web_port) and not _listening_on(grpc_port), "the viewer outlived the test"

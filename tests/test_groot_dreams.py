@@ -329,7 +329,7 @@ def test_a_thousand_episode_dump_lists_from_its_index(tmp_path):
 
 @pytest.mark.browser
 @pytest.mark.slow
-def test_a_neural_trajectory_in_chromium(dump, tmp_path):
+def test_a_neural_trajectory_in_chromium(dump, tmp_path, browser):
     """Pick an episode in Debian Chromium: the generated video (no GT frame), the card with the
     <DREAM> task and the calibration, and the arm moving on the canvas as the step slider moves."""
     sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -339,54 +339,45 @@ def test_a_neural_trajectory_in_chromium(dump, tmp_path):
         canvas_is_drawn,
         frame_sources,
         hide_software_webgl_notice,
-        launch,
         open_app,
         page_client_id,
         select_option,
-        skip_reason,
         slider_thumb,
         wait_until,
     )
-
-    reason = skip_reason()
-    if reason:
-        pytest.skip(reason)
-    from playwright.sync_api import sync_playwright
 
     from inspector.app import serve
 
     scene = (420, 120, 960, 900)
     app = serve([str(dump)], port=0, block=False)
     try:
-        with sync_playwright() as p:
-            browser = launch(p)
-            page = browser.new_page(viewport={"width": 1600, "height": 1000})
-            open_app(page, app.url)
-            hide_software_webgl_notice(page)
-            tab = wait_until(lambda: app.tabs.get(page_client_id(page)), what="the page's tab")
-            key = next(k for k in app.catalog.keys() if k.startswith("so100.data_idm / episode 1 "))
-            select_option(page, "Rollout", key)
-            wait_until(lambda: tab.key == key and tab.loaded is not None, what="episode 1 to open")
-            wait_until(lambda: set(frame_sources(page)) == {"webcam/imagined"}, timeout=60,
-                       what="the generated video's frame in the page")
-            for text in ("<DREAM>place the strawberry in the bowl", "gr00t-so100: shoulder_pan = x - 90"):
-                page.get_by_text(text).first.wait_for(state="visible", timeout=60_000)
-            page.wait_for_timeout(2000)  # let the software renderer draw the arm
-            before_shot = page.screenshot(clip={"x": scene[0], "y": scene[1], "width": scene[2] - scene[0],
-                                                "height": scene[3] - scene[1]})
-            assert canvas_is_drawn(page.screenshot(), scene), "the 3D canvas is blank"
-            before = frame_sources(page)["webcam/imagined"]
-            thumb = slider_thumb(page, re.compile(r"^Step$"))
-            thumb.focus()
-            for _ in range(12):
-                page.keyboard.press("ArrowRight")
-            wait_until(lambda: tab.step == 12, what="the step slider to move the tab")
-            wait_until(lambda: frame_sources(page)["webcam/imagined"] != before, what="the video frame to change")
-            assert tab.pairs[0].imagined_index == 12
-            wait_until(lambda: page.screenshot(clip={"x": scene[0], "y": scene[1], "width": scene[2] - scene[0],
-                                                     "height": scene[3] - scene[1]}) != before_shot,
-                       timeout=60, what="the arm to move on the canvas")
-            browser.close()
+        page = browser.new_page(viewport={"width": 1600, "height": 1000})
+        open_app(page, app.url)
+        hide_software_webgl_notice(page)
+        tab = wait_until(lambda: app.tabs.get(page_client_id(page)), what="the page's tab")
+        key = next(k for k in app.catalog.keys() if k.startswith("so100.data_idm / episode 1 "))
+        select_option(page, "Rollout", key)
+        wait_until(lambda: tab.key == key and tab.loaded is not None, what="episode 1 to open")
+        wait_until(lambda: set(frame_sources(page)) == {"webcam/imagined"}, timeout=60,
+                   what="the generated video's frame in the page")
+        for text in ("<DREAM>place the strawberry in the bowl", "gr00t-so100: shoulder_pan = x - 90"):
+            page.get_by_text(text).first.wait_for(state="visible", timeout=60_000)
+        page.wait_for_timeout(2000)  # let the software renderer draw the arm
+        before_shot = page.screenshot(clip={"x": scene[0], "y": scene[1], "width": scene[2] - scene[0],
+                                            "height": scene[3] - scene[1]})
+        assert canvas_is_drawn(page.screenshot(), scene), "the 3D canvas is blank"
+        before = frame_sources(page)["webcam/imagined"]
+        thumb = slider_thumb(page, re.compile(r"^Step$"))
+        thumb.focus()
+        for _ in range(12):
+            page.keyboard.press("ArrowRight")
+        wait_until(lambda: tab.step == 12, what="the step slider to move the tab")
+        wait_until(lambda: frame_sources(page)["webcam/imagined"] != before, what="the video frame to change")
+        assert tab.pairs[0].imagined_index == 12
+        wait_until(lambda: page.screenshot(clip={"x": scene[0], "y": scene[1], "width": scene[2] - scene[0],
+                                                 "height": scene[3] - scene[1]}) != before_shot,
+                   timeout=60, what="the arm to move on the canvas")
+        page.close()
     finally:
         app.stop()
 

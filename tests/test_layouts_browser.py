@@ -5,7 +5,7 @@ opens one rollout of each and sees its video and the arm."""
 from __future__ import annotations
 
 import pytest
-from browser import canvas_is_drawn, frame_sources, launch, skip_reason
+from browser import canvas_is_drawn, frame_sources, skip_reason
 from eval_outputs import write_eval
 from offline_runs import write_run
 from test_app_browser import SCENE_BOX, new_page, open_in_page
@@ -24,16 +24,6 @@ def app(tmp_path_factory):
     app = serve([root / "runs", root / "eval"], port=0, block=False)
     yield app
     app.stop()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = launch(p)
-        yield b
-        b.close()
 
 
 def test_a_rollout_of_each_layout_shows_its_video_and_the_arm(browser, app):

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from browser import hide_software_webgl_notice, launch, open_app, open_page, select_option, skip_reason, wait_until
+from browser import hide_software_webgl_notice, open_app, open_page, select_option, wait_until
 
 from inspector.app import serve
 from inspector.app._overview_rows import OverviewRow, OverviewRows
@@ -151,20 +151,6 @@ def test_figures_and_styles_are_the_reports():
 
 # ----------------------------------------------------------------------------------------------
 # In a real browser
-
-_reason = skip_reason()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    if _reason:
-        pytest.skip(_reason)
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = launch(p)
-        yield b
-        b.close()
 
 
 @pytest.fixture(scope="module")

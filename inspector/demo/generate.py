@@ -56,7 +56,8 @@ def rebuild_demo(out: Path | None = None, quick: bool = False, log: Callable[[st
 
     Args:
         out: destination session directory.
-        quick: a tiny version (small frames, fast motions, few rollouts) for tests.
+        quick: a tiny version (small frames drawn from decimated meshes, fast motions, few
+            rollouts) for tests.
 
     Returns:
         The session directory.
@@ -68,8 +69,8 @@ def rebuild_demo(out: Path | None = None, quick: bool = False, log: Callable[[st
     rng = np.random.default_rng(SEED)
     size = (64, 48) if quick else (320, 240)
     speed = 3.0 if quick else 1.25
-    gt_scene = DemoScene(*size, msaa=0 if quick else 4, shadows=not quick)
-    imagined_scene = DemoScene(*size, msaa=0, shadows=False)
+    gt_scene = DemoScene(*size, msaa=0 if quick else 4, shadows=not quick, coarse_meshes=quick)
+    imagined_scene = DemoScene(*size, msaa=0, shadows=False, coarse_meshes=quick)
     layouts = default_layouts()
     scripts = [("Pick the red cube", "pick", pick_motion),
                ("Pick the red cube and place it in the bowl", "place_in_bowl", place_in_bowl_motion)]

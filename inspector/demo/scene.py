@@ -32,9 +32,12 @@ os.environ.setdefault("MUJOCO_GL", "osmesa")
 if os.environ["MUJOCO_GL"] == "osmesa":
     os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 
+import contextlib
 import importlib.util
 import re
-from collections.abc import Sequence
+import shutil
+import tempfile
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -128,10 +131,11 @@ FRONT_CAMERA = CameraSpec(pos=(0.48, -0.28, 0.32), target=(0.13, 0.01, 0.10), fo
 WRIST_CAMERA = CameraSpec(pos=(0.005, -0.05, -0.025), target=(0.015, 0.0, -0.14), up=(0, -1, 0), fovy=70)
 
 
-def _arm_xml(assets: Path) -> str:
-    """The package's arm MJCF with absolute mesh paths and a wrist camera in the gripper body."""
+def _arm_xml(assets: Path, mesh_dir: Path | None = None) -> str:
+    """The package's arm MJCF with absolute mesh paths (``mesh_dir``: meshes of the same names
+    there instead) and a wrist camera in the gripper body."""
     xml = (assets / ARM_XML).read_text()
-    xml, n_meshdir = re.subn(r'meshdir="[^"]*"', f'meshdir="{assets / "assets"}"', xml)
+    xml, n_meshdir = re.subn(r'meshdir="[^"]*"', f'meshdir="{mesh_dir or assets / "assets"}"', xml)
     anchor = "<!-- Frame gripperframe -->"
     if n_meshdir != 1 or anchor not in xml:
         raise RuntimeError(f"{assets / ARM_XML}: unexpected layout (meshdir or gripperframe missing)")
@@ -156,12 +160,13 @@ def _bowl_xml() -> str:
     return "\n        ".join(parts)
 
 
-def scene_xml(width: int, height: int, msaa: int) -> tuple[str, dict[str, bytes]]:
+def scene_xml(width: int, height: int, msaa: int, mesh_dir: Path | None = None) -> tuple[str, dict[str, bytes]]:
     """The demo scene MJCF and the in-memory assets it includes.
 
     Args:
         width, height: largest image size any camera renders [px] (sets the offscreen buffer).
         msaa: multisampling (``visual/quality offsamples``); 0 turns it off.
+        mesh_dir: a folder holding the arm's meshes under their own names (default: the package's).
 
     Returns:
         (xml, assets) for ``mujoco.MjModel.from_xml_string``.
@@ -235,7 +240,20 @@ def scene_xml(width: int, height: int, msaa: int) -> tuple[str, dict[str, bytes]
   </equality>
 </mujoco>
 """
-    return xml, {ARM_XML: _arm_xml(assets).encode()}
+    return xml, {ARM_XML: _arm_xml(assets, mesh_dir).encode()}
+
+
+@contextlib.contextmanager
+def _coarse_mesh_dir() -> Iterator[Path]:
+    """A temporary folder of the arm's meshes decimated (``inspector.robot.meshes``), under their
+    own names: a tenth of the faces, which OSMesa draws about nine times quicker (its time goes on
+    the vertices, not the pixels, at a test's frame sizes)."""
+    from ..robot.meshes import decimated_mesh
+
+    with tempfile.TemporaryDirectory(prefix="inspector-coarse-meshes-") as folder:
+        for stl in (model_dir() / "assets").glob("*.stl"):
+            shutil.copyfile(decimated_mesh(stl), Path(folder) / stl.name)
+        yield Path(folder)
 
 
 # --------------------------------------------------------------------------------------------
@@ -407,6 +425,8 @@ class DemoScene:
         width, height: image size of every camera [px].
         msaa: multisampling samples (0 = off; 4 is a good trade-off on the CPU).
         shadows: draw shadows (most of the CPU render time, but they anchor the cubes visually).
+        coarse_meshes: the arm's meshes decimated (collision hulls too): frames many times
+            quicker to draw, for tests.
 
     Usage::
 
@@ -415,9 +435,11 @@ class DemoScene:
         sim = scene.simulate_episode(pick_motion(scene))  # state/action/frames at 30 fps
     """
 
-    def __init__(self, width: int = 320, height: int = 240, msaa: int = 4, shadows: bool = True):
-        xml, assets = scene_xml(width, height, msaa)
-        self.model = mujoco.MjModel.from_xml_string(xml, assets)
+    def __init__(self, width: int = 320, height: int = 240, msaa: int = 4, shadows: bool = True,
+                 coarse_meshes: bool = False):
+        with _coarse_mesh_dir() if coarse_meshes else contextlib.nullcontext(None) as mesh_dir:
+            xml, assets = scene_xml(width, height, msaa, mesh_dir)
+            self.model = mujoco.MjModel.from_xml_string(xml, assets)  # reads the meshes
         self.data = mujoco.MjData(self.model)
         self.width, self.height, self.shadows = width, height, shadows
         m = self.model
