@@ -166,6 +166,18 @@ def browser(playwright):
     b.close()
 
 
+@pytest.fixture(scope="session")
+def demo_app():
+    """The bundled demo served once for the whole run, for tests that only read it (each in pages
+    of its own): its Overview rows are computed once, its playback clips encoded once."""
+    from inspector.app import serve
+    from inspector.data.sources import BUNDLED_DEMO
+
+    app = serve([BUNDLED_DEMO], port=0, block=False)
+    yield app
+    app.stop()
+
+
 @pytest.fixture(autouse=True)
 def _close_pages_left_open(request: pytest.FixtureRequest):
     """Close the pages a test left open in the shared ``browser``: one that fails midway skips

@@ -83,18 +83,24 @@ def open_in_page(page, tab, app, tag: str) -> None:
     wait_until(shown_as_on_server, timeout=30, what="the page to show the server's frames")
 
 
-def test_page_loads_and_scene_renders(browser, app):
+def test_page_loads_and_scene_renders(browser, app, tmp_path):
+    """The 60-chunk rollout in a page: its frames, the 3D scene drawn (the screenshot is kept as
+    ``<tmp_path>/app.png``), its prompt and the unit mode."""
     page, tab = new_page(browser, app)
     open_in_page(page, tab, app, LONG)
     assert set(frame_sources(page)) == {f"{v}/{k}" for v in VIEWS for k in ("imagined", "gt")}
     page.wait_for_timeout(1500)  # let the software renderer draw the arm
-    assert canvas_is_drawn(page.screenshot(), SCENE_BOX), "the 3D canvas is blank"
+    png = page.screenshot()
+    (tmp_path / "app.png").write_bytes(png)
+    assert canvas_is_drawn(png, SCENE_BOX), "the 3D canvas is blank"
     assert page.get_by_text(tab.loaded.timeline.rollout.prompt).first.is_visible()
     assert page.get_by_text("arm degrees, gripper 0..100").first.is_visible()  # unit mode always shown
     page.close()
 
 
-def test_chunk_slider_moves_server_state_and_video(browser, app):
+def test_chunk_slider_play_button_and_step_keys(browser, app):
+    """The Chunk slider moves the server's tab and the video (keys and a mouse drag); Play, Pause,
+    and the L and PageDown keys step the timeline."""
     page, tab = new_page(browser, app)
     open_in_page(page, tab, app, LONG)
     before = frame_sources(page)
@@ -113,6 +119,20 @@ def test_chunk_slider_moves_server_state_and_video(browser, app):
     page.mouse.move(box["x"] + 120, box["y"] + box["height"] / 2, steps=8)
     page.mouse.up()
     wait_until(lambda: tab.chunk > 10, what="the drag to move the chunk")
+    # Play and Pause from the start, then the step keys (one page for the slider and the buttons).
+    tab.set_step(0)
+    page.get_by_role("button", name="Play").click()
+    wait_until(lambda: tab.playing and tab.step > 5, what="playback to advance")
+    page.get_by_role("button", name="Pause").click()
+    wait_until(lambda: not tab.playing, what="playback to pause")
+    stopped = tab.step
+    page.wait_for_timeout(500)
+    assert tab.step == stopped
+    page.locator("body").click(position={"x": 600, "y": 950})  # focus the page, not a control
+    page.keyboard.press("l")  # next step
+    wait_until(lambda: tab.step == stopped + 1, what="the L key to step forward")
+    page.keyboard.press("PageDown")  # next chunk
+    wait_until(lambda: tab.step == stopped + 1 + tab.loaded.timeline.steps_per_chunk, what="PageDown")
     page.close()
 
 
@@ -162,24 +182,6 @@ def test_keys_step_the_timeline_without_moving_the_3d_view(browser, app):
     page.close()
 
 
-def test_play_button_and_step_keys(browser, app):
-    page, tab = new_page(browser, app)
-    open_in_page(page, tab, app, LONG)
-    page.get_by_role("button", name="Play").click()
-    wait_until(lambda: tab.playing and tab.step > 5, what="playback to advance")
-    page.get_by_role("button", name="Pause").click()
-    wait_until(lambda: not tab.playing, what="playback to pause")
-    stopped = tab.step
-    page.wait_for_timeout(500)
-    assert tab.step == stopped
-    page.locator("body").click(position={"x": 600, "y": 950})  # focus the page, not a control
-    page.keyboard.press("l")  # next step
-    wait_until(lambda: tab.step == stopped + 1, what="the L key to step forward")
-    page.keyboard.press("PageDown")  # next chunk
-    wait_until(lambda: tab.step == stopped + 1 + tab.loaded.timeline.steps_per_chunk, what="PageDown")
-    page.close()
-
-
 # Frames the page's playing clip of the front view has presented (None until one plays).
 CLIP_FRAMES_PRESENTED = """() => {
     const v = document.querySelector("video.inspector-frame[data-view='front'][data-kind='imagined']");
@@ -194,54 +196,49 @@ CLIP_TIME_SHOWN = """() => {
             first: +g.dataset.clipFirst}; }"""
 
 
-def test_playback_is_a_video_the_browser_presents_at_the_rollout_rate(browser):
+def test_playback_is_a_video_the_browser_presents_at_the_rollout_rate(browser, demo_app):
     """Playing the demo, every panel becomes a clip the browser plays by itself: it presents
     frames at the clip's rate, where stepping images manages under one a second here (WebGL in
     software). Pause brings back the images of the step playback stopped at."""
-    from inspector.data.sources import BUNDLED_DEMO
+    demo = demo_app
+    page, tab = new_page(browser, demo)
+    open_in_page(page, tab, demo, "prompt_train")
+    tab.speed = 0.5  # 15 frames/s and a 29 s clip: time to start on a busy machine
+    tab.play()
+    first = wait_until(lambda: page.evaluate(CLIP_FRAMES_PRESENTED), timeout=120, interval=0.05,
+                       what="the playback clip to play in the page")
+    start = time.monotonic()
+    page.wait_for_timeout(4000)
+    presented = (page.evaluate(CLIP_FRAMES_PRESENTED) or first) - first
+    rate = presented / (time.monotonic() - start)
+    assert rate >= 10, f"the clip presented {rate:.1f} frames/s (15 expected)"
+    kinds = page.evaluate("() => [...document.querySelectorAll('video.inspector-frame')]"
+                          ".map(v => v.dataset.view + '/' + v.dataset.kind).sort()")
+    assert kinds == sorted(f"{p.view}/{k}" for p in tab.pairs for k in ("imagined", "gt"))
+    # The time under the frames is the step the clip shows, not the step it started from. The
+    # page writes it on the video's timeupdate events, which wait behind whatever the page's
+    # main thread is doing (a software-WebGL frame takes 1-2 s here): look until one look finds
+    # it caught up; a time line that stands still never does, as the clip plays on.
+    seen = []
 
-    demo = serve([BUNDLED_DEMO], port=0, block=False)
+    def caught_up():
+        shown = page.evaluate(CLIP_TIME_SHOWN)
+        seen.append(shown)
+        match = re.fullmatch(r"t = (\d+\.\d\d) s · step (\d+) · playing", shown["caption"])
+        assert match, shown["caption"]
+        assert float(match[1]) == pytest.approx(int(match[2]) / 30, abs=0.006), shown
+        clip_step = shown["first"] + shown["t"] * 15  # the clip's step by its own clock, 15 frames/s
+        return abs(int(match[2]) - clip_step) <= 8 and int(match[2]) > shown["first"]
+
     try:
-        page, tab = new_page(browser, demo)
-        open_in_page(page, tab, demo, "prompt_train")
-        tab.speed = 0.5  # 15 frames/s and a 29 s clip: time to start on a busy machine
-        tab.play()
-        first = wait_until(lambda: page.evaluate(CLIP_FRAMES_PRESENTED), timeout=120, interval=0.05,
-                           what="the playback clip to play in the page")
-        start = time.monotonic()
-        page.wait_for_timeout(4000)
-        presented = (page.evaluate(CLIP_FRAMES_PRESENTED) or first) - first
-        rate = presented / (time.monotonic() - start)
-        assert rate >= 10, f"the clip presented {rate:.1f} frames/s (15 expected)"
-        kinds = page.evaluate("() => [...document.querySelectorAll('video.inspector-frame')]"
-                              ".map(v => v.dataset.view + '/' + v.dataset.kind).sort()")
-        assert kinds == sorted(f"{p.view}/{k}" for p in tab.pairs for k in ("imagined", "gt"))
-        # The time under the frames is the step the clip shows, not the step it started from. The
-        # page writes it on the video's timeupdate events, which wait behind whatever the page's
-        # main thread is doing (a software-WebGL frame takes 1-2 s here): look until one look finds
-        # it caught up; a time line that stands still never does, as the clip plays on.
-        seen = []
-
-        def caught_up():
-            shown = page.evaluate(CLIP_TIME_SHOWN)
-            seen.append(shown)
-            match = re.fullmatch(r"t = (\d+\.\d\d) s · step (\d+) · playing", shown["caption"])
-            assert match, shown["caption"]
-            assert float(match[1]) == pytest.approx(int(match[2]) / 30, abs=0.006), shown
-            clip_step = shown["first"] + shown["t"] * 15  # the clip's step by its own clock, 15 frames/s
-            return abs(int(match[2]) - clip_step) <= 8 and int(match[2]) > shown["first"]
-
-        try:
-            wait_until(caught_up, timeout=20, interval=0.2, what="the time line to follow the clip")
-        except AssertionError as exc:
-            raise AssertionError(f"{exc}; the last looks: {seen[-3:]}") from None
-        tab.pause()
-        wait_until(lambda: not page.evaluate("() => !!document.querySelector('video')")
-                   and frame_sources(page).get("front/imagined") == tab.pairs[0].imagined,
-                   timeout=120, what="the paused step's images")
-        page.close()
-    finally:
-        demo.stop()
+        wait_until(caught_up, timeout=20, interval=0.2, what="the time line to follow the clip")
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}; the last looks: {seen[-3:]}") from None
+    tab.pause()
+    wait_until(lambda: not page.evaluate("() => !!document.querySelector('video')")
+               and frame_sources(page).get("front/imagined") == tab.pairs[0].imagined,
+               timeout=120, what="the paused step's images")
+    page.close()
 
 
 def _settled_frames(page, timeout_s: float = 30.0) -> dict[str, str]:
@@ -278,7 +275,9 @@ def test_two_pages_hold_independent_timelines(browser, app):
     p2.close()
 
 
-def test_broken_rollout_shows_error_card_and_others_still_load(browser, app):
+def test_broken_rollout_shows_error_card_and_a_single_chunk_the_step_slider_only(browser, app):
+    """A rollout that fails to load shows its error card and the others still open; a single-chunk
+    sample (one chunk) then shows no chunk slider and no prev/next/worst buttons."""
     page, tab = new_page(browser, app)
     select_option(page, "Rollout", key(app, BROKEN) + " ⚠")
     card = page.locator(".inspector-error-card")
@@ -287,6 +286,17 @@ def test_broken_rollout_shows_error_card_and_others_still_load(browser, app):
     assert tab.loaded is None and tab.error is not None
     open_in_page(page, tab, app, SINGLE)
     assert page.locator(".inspector-error-card").count() == 0 or not card.is_visible()
+    assert tab.loaded.timeline.n_chunks == 1
+    chunk_slider = page.locator("label", has_text=re.compile(r"^Chunk$")).first
+    wait_until(lambda: not chunk_slider.is_visible(), what="the chunk slider to hide")
+    assert page.locator("label", has_text=re.compile(r"^Step$")).first.is_visible()  # not "Step in chunk"
+    assert not page.get_by_role("button", name="worst").is_visible()
+    thumb = slider_thumb(page, re.compile(r"^Step$"))
+    thumb.focus()
+    page.keyboard.press("ArrowRight")
+    wait_until(lambda: tab.step == 1, what="the step slider to move the tab")
+    open_in_page(page, tab, app, LONG)  # and back for a chunked rollout
+    wait_until(chunk_slider.is_visible, what="the chunk slider to come back")
     page.close()
 
 
@@ -297,7 +307,7 @@ def test_screenshot(browser, app, tmp_path):
     from inspector.data.session import is_session
     from inspector.data.sources import BUNDLED_DEMO
 
-    shots: list[tuple[object, str | None, Path | None]] = [(app, LONG, None)]
+    shots: list[tuple[object, str | None, Path | None]] = []
     if os.environ.get("INSPECTOR_DOCS_SCREENSHOT") and is_session(BUNDLED_DEMO):
         demo = serve([BUNDLED_DEMO], port=0, block=False)
         shots.append((demo, None, DOCS_SCREENSHOT))
@@ -306,6 +316,9 @@ def test_screenshot(browser, app, tmp_path):
 
         imported = import_dreamzero(real_fixtures_dir() / "dreamzero_so101", tmp_path / "dz", log=lambda _: None)
         shots.append((serve([imported], port=0, block=False), "ep000_train", DOCS_IMPORTED))
+    if not shots:
+        pytest.skip("refreshes docs/ only with INSPECTOR_DOCS_SCREENSHOT=1 (the app's own screenshot: "
+                    "test_page_loads_and_scene_renders)")
     try:
         for shot_app, tag, docs_path in shots:
             page, tab = new_page(browser, shot_app)
@@ -324,7 +337,7 @@ def test_screenshot(browser, app, tmp_path):
                 docs_path.write_bytes(out.read_bytes())
             page.close()
     finally:
-        for shot_app, _, _ in shots[1:]:
+        for shot_app, _, _ in shots:
             shot_app.stop()
 
 
@@ -362,27 +375,17 @@ def test_compare_shows_the_second_rollouts_video(browser, app):
     page.close()
 
 
-def test_single_chunk_rollout_shows_the_step_slider_only(browser, app):
-    """A single-chunk sample has one chunk: no chunk slider, no prev/next/worst buttons."""
-    page, tab = new_page(browser, app)
-    open_in_page(page, tab, app, SINGLE)
-    assert tab.loaded.timeline.n_chunks == 1
-    chunk_slider = page.locator("label", has_text=re.compile(r"^Chunk$")).first
-    wait_until(lambda: not chunk_slider.is_visible(), what="the chunk slider to hide")
-    assert page.locator("label", has_text=re.compile(r"^Step$")).first.is_visible()  # not "Step in chunk"
-    assert not page.get_by_role("button", name="worst").is_visible()
-    thumb = slider_thumb(page, re.compile(r"^Step$"))
-    thumb.focus()
-    page.keyboard.press("ArrowRight")
-    wait_until(lambda: tab.step == 1, what="the step slider to move the tab")
-    open_in_page(page, tab, app, LONG)  # and back for a chunked rollout
-    wait_until(chunk_slider.is_visible, what="the chunk slider to come back")
-    page.close()
+def test_light_3d_and_the_notes_panel(browser, app):
+    """One page for the panel's controls.
 
+    Light 3D: headless Chromium draws WebGL in software (SwiftShader): the page ticks "Light 3D"
+    by itself and the server turns that page's environment map off; a user who unticks it keeps it so.
 
-def test_a_page_without_a_gpu_ticks_light_3d(browser, app):
-    """Headless Chromium draws WebGL in software (SwiftShader): the page ticks "Light 3D" by itself
-    and the server turns that page's environment map off; a user who unticks it keeps it so."""
+    Notes: each field carries the id its label points to (viser's text inputs have none of their
+    own), and keeps it while typed into and after its folder is closed and opened again; typing
+    into them and saving writes the session's annotations.json."""
+    import json
+
     page, tab = new_page(browser, app)
     wait_until(lambda: tab.controls.light_3d.value is True, what="the page to tick Light 3D")
     wait_until(lambda: tab.hemisphere_light is not None and tab.hemisphere_light.visible,
@@ -395,6 +398,37 @@ def test_a_page_without_a_gpu_ticks_light_3d(browser, app):
     wait_until(lambda: not tab.hemisphere_light.visible, what="the plain light to go")
     page.wait_for_timeout(2000)  # the page's script looks every 0.5 s; it ticks once per connection
     assert tab.controls.light_3d.value is False and not box.is_checked()
+    folder = page.get_by_text("Notes", exact=True).first
+    folder.click()
+    for name in ("Rollout note", "Chunk note", "Flag rollout"):
+        label = page.locator("label", has_text=re.compile(f"^{name}$")).first
+        label.wait_for(state="visible")
+        target = label.get_attribute("for")
+        field = page.locator(f"[id='{target}']")
+        wait_until(lambda: field.count() == 1, what=f"the field {name!r} labels")
+        assert field.evaluate("el => el.tagName") == "INPUT"
+    note = page.get_by_label("Rollout note", exact=True)
+    note.fill("typed")
+    assert note.input_value() == "typed"
+    folder.click()  # closed and open again: the fields are rendered anew
+    folder.click()
+    wait_until(lambda: page.get_by_label("Chunk note", exact=True).count() == 1,
+               what="the chunk note's label to find its field again")
+    assert page.get_by_label("Rollout note", exact=True).count() == 1
+    open_in_page(page, tab, app, LONG)
+    page.get_by_label("Rollout note", exact=True).fill("grasp slips at chunk 12")  # fields found by label
+    page.get_by_label("Chunk note", exact=True).fill("cube out of view")
+    page.get_by_role("button", name="Save notes").click()
+    annotations = tab.loaded.entry.session.root / "annotations.json"
+
+    def saved() -> dict | None:  # the rollout's note and then the chunk's are written
+        try:
+            entry = json.loads(annotations.read_text())["rollouts"][LONG]
+        except (OSError, ValueError, KeyError):
+            return None
+        return entry if "0" in entry.get("chunks", {}) else None
+    note = wait_until(saved, what="annotations.json to be written")
+    assert note["note"] == "grasp slips at chunk 12" and note["chunks"]["0"]["note"] == "cube out of view"
     page.close()
 
 
@@ -443,54 +477,7 @@ def test_the_camera_is_fitted_to_the_canvas_the_page_has(browser, app):
     page.close()
 
 
-def test_notes_are_saved_to_annotations(browser, app):
-    """Typing into the notes fields and saving writes the session's annotations.json."""
-    import json
-
-    page, tab = new_page(browser, app)
-    open_in_page(page, tab, app, LONG)
-    page.get_by_text("Notes", exact=True).first.click()  # the folder starts closed
-    page.get_by_label("Rollout note", exact=True).fill("grasp slips at chunk 12")  # fields found by label
-    page.get_by_label("Chunk note", exact=True).fill("cube out of view")
-    page.get_by_role("button", name="Save notes").click()
-    annotations = tab.loaded.entry.session.root / "annotations.json"
-
-    def saved() -> dict | None:  # the rollout's note and then the chunk's are written
-        try:
-            entry = json.loads(annotations.read_text())["rollouts"][LONG]
-        except (OSError, ValueError, KeyError):
-            return None
-        return entry if "0" in entry.get("chunks", {}) else None
-    note = wait_until(saved, what="annotations.json to be written")
-    assert note["note"] == "grasp slips at chunk 12" and note["chunks"]["0"]["note"] == "cube out of view"
-    page.close()
-
-
-def test_notes_fields_are_labelled_for_assistive_tech(browser, app):
-    """Each notes field carries the id its label points to (viser's text inputs have none of
-    their own), and keeps it while typed into and after its folder is closed and opened again."""
-    page, tab = new_page(browser, app)
-    folder = page.get_by_text("Notes", exact=True).first
-    folder.click()
-    for name in ("Rollout note", "Chunk note", "Flag rollout"):
-        label = page.locator("label", has_text=re.compile(f"^{name}$")).first
-        label.wait_for(state="visible")
-        target = label.get_attribute("for")
-        field = page.locator(f"[id='{target}']")
-        wait_until(lambda: field.count() == 1, what=f"the field {name!r} labels")
-        assert field.evaluate("el => el.tagName") == "INPUT"
-    note = page.get_by_label("Rollout note", exact=True)
-    note.fill("typed")
-    assert note.input_value() == "typed"
-    folder.click()  # closed and open again: the fields are rendered anew
-    folder.click()
-    wait_until(lambda: page.get_by_label("Chunk note", exact=True).count() == 1,
-               what="the chunk note's label to find its field again")
-    assert page.get_by_label("Rollout note", exact=True).count() == 1
-    page.close()
-
-
-def test_arms_readout_and_video_play_on_one_clock(browser):
+def test_arms_readout_and_video_play_on_one_clock(browser, demo_app):
     """The demo at 1x with its clip playing: the step over the arms is the step of the video beside
     them (median gap at most 3 steps), from the clip's first frame to the end; Pause is answered
     within 1 s, the arms and the images on the step the clip had reached.
@@ -504,33 +491,28 @@ def test_arms_readout_and_video_play_on_one_clock(browser):
     for the whole playback."""
     import statistics
 
-    from inspector.data.sources import BUNDLED_DEMO
+    demo = demo_app
+    page, tab = new_page(browser, demo)
+    open_in_page(page, tab, demo, "prompt_train")
+    fps = tab.loaded.timeline.fps
+    wait_until(lambda: tab.controls.light_3d.value is True, what="the page to tick Light 3D")
+    tab.play()  # encode the clips once: the measured Play finds them cached
+    wait_until(lambda: tab._clip is not None, timeout=180, what="the playback clips")
+    tab.pause()
+    tab.set_step(0)
+    wait_until(lambda: page.evaluate(ARM_AND_VIDEO_STEP)["images"], timeout=60, what="the images back")
 
-    demo = serve([BUNDLED_DEMO], port=0, block=False)
-    try:
-        page, tab = new_page(browser, demo)
-        open_in_page(page, tab, demo, "prompt_train")
-        fps = tab.loaded.timeline.fps
-        wait_until(lambda: tab.controls.light_3d.value is True, what="the page to tick Light 3D")
-        tab.play()  # encode the clips once: the measured Play finds them cached
-        wait_until(lambda: tab._clip is not None, timeout=180, what="the playback clips")
-        tab.pause()
-        tab.set_step(0)
-        wait_until(lambda: page.evaluate(ARM_AND_VIDEO_STEP)["images"], timeout=60, what="the images back")
-
-        measured = play_on_one_clock(page, tab)
-        gaps, frame_s, (pause,) = measured["gaps"], measured["frame_s"], measured["pauses"]
-        assert len(gaps) >= 5, f"the clip played in only {len(gaps)} looks"
-        gap_bound = max(3.0, frame_s * fps)
-        assert statistics.median(gaps) <= gap_bound, (
-            f"median gap {statistics.median(gaps):.1f} steps (bound {gap_bound:.1f}; a 3D frame every "
-            f"{frame_s * 1e3:.0f} ms); gaps: {[round(g) for g in gaps]}")
-        pause_bound = max(1.0, 2 * frame_s)
-        assert pause["s"] <= pause_bound, f"Pause answered after {pause['s']:.2f} s (bound {pause_bound:.2f} s)"
-        assert pause["tab_step"] == pause["step"]  # the arms are where the images are
-        # it stopped where the clip was, give or take what the clip played while the press travelled
-        # (a page too busy to pass the press on is as late with its last report of the clip)
-        assert abs(pause["step"] - pause["clip_step"]) <= fps * pause["s"] + 3, pause
-        page.close()
-    finally:
-        demo.stop()
+    measured = play_on_one_clock(page, tab)
+    gaps, frame_s, (pause,) = measured["gaps"], measured["frame_s"], measured["pauses"]
+    assert len(gaps) >= 5, f"the clip played in only {len(gaps)} looks"
+    gap_bound = max(3.0, frame_s * fps)
+    assert statistics.median(gaps) <= gap_bound, (
+        f"median gap {statistics.median(gaps):.1f} steps (bound {gap_bound:.1f}; a 3D frame every "
+        f"{frame_s * 1e3:.0f} ms); gaps: {[round(g) for g in gaps]}")
+    pause_bound = max(1.0, 2 * frame_s)
+    assert pause["s"] <= pause_bound, f"Pause answered after {pause['s']:.2f} s (bound {pause_bound:.2f} s)"
+    assert pause["tab_step"] == pause["step"]  # the arms are where the images are
+    # it stopped where the clip was, give or take what the clip played while the press travelled
+    # (a page too busy to pass the press on is as late with its last report of the clip)
+    assert abs(pause["step"] - pause["clip_step"]) <= fps * pause["s"] + 3, pause
+    page.close()

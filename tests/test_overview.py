@@ -289,18 +289,14 @@ def test_rollouts_are_listed_with_the_broken_one_as_an_error_row(browser, tmp_pa
 
 @pytest.mark.browser
 @pytest.mark.slow
-def test_overview_screenshot(browser, tmp_path):
+def test_overview_screenshot(browser, demo_app, tmp_path):
     """The demo's overview; refreshes docs/overview.png when INSPECTOR_DOCS_SCREENSHOT=1."""
-    app = serve([BUNDLED_DEMO], port=0, block=False)
-    try:
-        page, tab = _open(browser, app)
-        hide_software_webgl_notice(page)
-        page.locator(".inspector-overview figure#drift svg.chart").first.wait_for(state="visible")
-        page.wait_for_timeout(1000)  # let the layout settle
-        out = tmp_path / "overview.png"
-        page.screenshot(path=str(out))
-        if os.environ.get("INSPECTOR_DOCS_SCREENSHOT"):
-            DOCS_SCREENSHOT.write_bytes(out.read_bytes())
-        page.close()
-    finally:
-        app.stop()
+    page, tab = _open(browser, demo_app)
+    hide_software_webgl_notice(page)
+    page.locator(".inspector-overview figure#drift svg.chart").first.wait_for(state="visible")
+    page.wait_for_timeout(1000)  # let the layout settle
+    out = tmp_path / "overview.png"
+    page.screenshot(path=str(out))
+    if os.environ.get("INSPECTOR_DOCS_SCREENSHOT"):
+        DOCS_SCREENSHOT.write_bytes(out.read_bytes())
+    page.close()
