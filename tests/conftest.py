@@ -190,10 +190,23 @@ def _close_pages_left_open(request: pytest.FixtureRequest):
             context.close()
 
 
+# A test that asks for one of these drives a real browser: it is marked ``browser`` and ``slow``
+# wherever it is (a page takes seconds to load on a 2-core machine), so ``-m "not slow"`` leaves it out.
+BROWSER_FIXTURES = frozenset({"browser", "playwright"})
+
+
+@pytest.hookimpl(tryfirst=True)  # before ``-m`` deselects by these marks
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Real-browser tests may rerun twice: headless Chromium on a busy 2-core machine (software
+    """Mark the tests that use the shared browser (``BROWSER_FIXTURES``) ``browser`` and ``slow``.
+
+    Real-browser tests may rerun twice: headless Chromium on a busy 2-core machine (software
     WebGL) sometimes misses a timing window that has nothing to do with the app. A test that fails
     three times in a row still fails."""
+    for item in items:
+        if BROWSER_FIXTURES & set(getattr(item, "fixturenames", ())):
+            for mark in ("browser", "slow"):
+                if item.get_closest_marker(mark) is None:
+                    item.add_marker(getattr(pytest.mark, mark))
     if not config.pluginmanager.hasplugin("rerunfailures"):
         return
     for item in items:
