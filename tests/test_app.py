@@ -28,6 +28,8 @@ from inspector.app._playback_clip import CLIP_STEPS
 from inspector.app._state import ARMS_AFTER_FRAME_S
 from inspector.errors import InspectorError
 
+pytestmark = pytest.mark.slow  # a served app per module and the serve command as a process
+
 DEMO = Path(__file__).resolve().parents[1] / "sessions" / "demo"
 # The demo's rollouts the app tests use, by what they are for (``inspector info sessions/demo``).
 LONG = "overrun_60chunks"  # 60 chunks of 9 steps (540) on a 409-frame episode

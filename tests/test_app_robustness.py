@@ -55,6 +55,8 @@ from inspector.app._annotations import read_annotations, update_annotation
 from inspector.data.sources import check_confined, open_sources
 from inspector.errors import InspectorError
 
+pytestmark = pytest.mark.slow  # browser pages, served apps and commands killed mid-write
+
 ESCAPE = "resolves outside the served roots"
 
 

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow  # the CLI as processes
+
 REPO = Path(__file__).resolve().parents[1]
 DEMO = str(REPO / "sessions" / "demo")
 

@@ -15,6 +15,8 @@ from scipy import stats
 
 from inspector.report.compare import compare_reports, pair_rows, paired_summary
 
+pytestmark = pytest.mark.slow  # the CLI as processes
+
 DEMO = Path(__file__).resolve().parents[1] / "sessions" / "demo"
 OFFSET_DEG = 10.0  # added to shoulder_pan of every predicted action of the rollouts below
 WORSENED = ["bias_elbow", "single_f076", "tempo_0.8x"]

@@ -106,6 +106,7 @@ def test_single_chunk_error_grows_along_the_horizon(demo):
         assert np.all(np.diff(mse) > 0)
 
 
+@pytest.mark.slow
 def test_report_shows_each_fault(demo):
     out = subprocess.run([sys.executable, "-m", "inspector", "report", str(DEMO_DIR)],
                          capture_output=True, text=True, timeout=600)
@@ -115,6 +116,7 @@ def test_report_shows_each_fault(demo):
     assert "Prompt divergence" in out.stdout
 
 
+@pytest.mark.slow
 def test_report_finds_the_video_running_ahead_of_its_actions():
     """video_ahead_1s: prompt_train's joints, its imagined video 30 frames (1 s) ahead of them."""
     out = subprocess.run([sys.executable, "-m", "inspector", "report", str(DEMO_DIR), "--json"],
@@ -147,6 +149,7 @@ def test_quick_rebuild(tmp_path):
     assert out.returncode == 0, out.stderr
     session = open_session(tmp_path / "d")
     assert not session.errors and {"tempo_0.8x", "limits_wrist"} <= set(session.rollouts)
+    assert any(r.kind == "single_chunk" for r in session.rollouts.values())
     tl = build_timeline(session.rollouts["tempo_0.8x"])
     assert tl.has_gt_joints and tl.time_aligned_drift.mean() > tl.best_match_drift.mean()
     assert len(session.rollouts["tempo_0.8x"].video("front")) == tl.n_steps

@@ -21,6 +21,8 @@ from inspector.data.session import SessionWriter
 from inspector.errors import InspectorError
 from inspector.units import JOINT_NAMES
 
+pytestmark = pytest.mark.slow  # the CLI as processes, a Hub server and a browser page
+
 REPO = Path(__file__).resolve().parents[1]
 DEMO_DATASET = REPO / "sessions" / "demo" / "dataset"
 RERUN = Path(sys.executable).parent / "rerun"

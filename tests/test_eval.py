@@ -23,6 +23,8 @@ from inspector.units import JOINT_NAMES
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from policy_server import DEFAULT_CONFIG, object_array, policy_server, ramp  # noqa: E402
 
+pytestmark = pytest.mark.slow  # policy servers and the eval command as processes
+
 LENGTHS = (60, 45)
 HORIZON = 24
 DEADLINE_S = 120  # generous: the suite runs on a busy 2-core machine

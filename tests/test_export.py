@@ -32,6 +32,8 @@ from inspector.robot.kinematics import kinematics
 from inspector.robot.meshes import cluster_vertices, decimated_mesh
 from inspector.units import JOINT_LIMITS_RAD, JOINT_NAMES, to_radians
 
+pytestmark = pytest.mark.slow  # recordings written and checked with rerun rrd verify
+
 RERUN = Path(sys.executable).parent / "rerun"
 ARM_CHAIN = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll")
 

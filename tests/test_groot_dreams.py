@@ -24,6 +24,8 @@ from inspector.data.importers.calibration import GR00T_SO100_OFFSETS, parse_cali
 from inspector.errors import InspectorError
 from inspector.units import JOINT_NAMES
 
+pytestmark = pytest.mark.slow  # the CLI as processes and a browser page
+
 RERUN = Path(sys.executable).parent / "rerun"
 EPISODES = [("pick the grape", 20), ("place the strawberry in the bowl", 24), ("pick the grape", 18)]
 

@@ -30,6 +30,8 @@ import pytest
 
 from inspector.data.lerobot_writer import EpisodeData, write_lerobot_dataset
 
+pytestmark = pytest.mark.slow  # the CLI and serve as processes
+
 EPISODES_PARQUET = "meta/episodes/chunk-000/file-000.parquet"
 DATA_PARQUET = "data/chunk-000/file-000.parquet"
 FRONT_MP4 = "videos/observation.images.front/chunk-000/file-000.mp4"

@@ -27,6 +27,8 @@ from inspector.data.lerobot_writer import EpisodeData, write_lerobot_dataset
 from inspector.errors import MAX_FILE_CHARS, MAX_WHAT_CHARS, InspectorError
 from inspector.schema import MAX_WHOLE, whole_number
 
+pytestmark = pytest.mark.slow  # the CLI as processes on large inputs, peak memory measured
+
 # Generous bounds: these commands take 50-250 MiB after the fix, and 0.7-2.6 GB before it.
 PEAK_RSS_MIB = 600
 # The longest error line: the file (cut to about MAX_FILE_CHARS) and the message (MAX_WHAT_CHARS).

@@ -74,6 +74,7 @@ def test_fk_matches_pytorch_kinematics_for_every_link():
         np.testing.assert_allclose(ours[link], theirs[link].get_matrix().numpy(), atol=2e-6)
 
 
+@pytest.mark.slow
 def test_the_command_line_never_loads_torch(tmp_path):
     """FK, metrics and video run on numpy alone: no command pays torch's ~2 s and ~250 MB."""
     import subprocess

@@ -163,6 +163,7 @@ def test_every_public_name_resolves(package: str) -> None:
         assert public in dir(module)
 
 
+@pytest.mark.slow
 def test_top_level_imports_stay_light() -> None:
     """``import inspector`` loads nothing heavy; names load on first use (``inspector info`` never
     pays for rerun, viser or torch)."""

@@ -26,6 +26,8 @@ from inspector.data.session import open_session
 from inspector.data.video import VideoClip
 from inspector.units import JOINT_LIMITS_RAD
 
+pytestmark = pytest.mark.slow  # the CLI as processes and a served app
+
 TASKS = {("so101_sim", 0): [True, False], ("so101_sim", 1): [True]}
 
 

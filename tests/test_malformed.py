@@ -49,6 +49,8 @@ from inspector.data.session import SessionWriter, open_session
 from inspector.errors import InspectorError
 from inspector.units import JOINT_NAMES
 
+pytestmark = pytest.mark.slow  # every malformed case run through the CLI as a process
+
 # ==============================================================================================
 # Mutation helpers
 

@@ -230,6 +230,7 @@ def test_rollout_property(broken: str, data: st.DataObject, twin: bool, with_dat
                                                           max_size=6), min_size=0, max_size=3),
                         "episode_length": st.none() | st.integers(-2, 40) | st.booleans(),
                         "frame_in_ep": st.integers(-1, 10 ** 20), "predicted_frames": st.integers(-1, 3)}))
+@pytest.mark.slow
 def test_importer_property_all_or_nothing(meta: bytes) -> None:
     """Any single-chunk ``meta.json``: the import succeeds, or fails with InspectorError and
     leaves nothing next to the destination."""
@@ -256,6 +257,7 @@ def test_importer_property_all_or_nothing(meta: bytes) -> None:
 
 @pytest.mark.parametrize("value", [10 ** 400, [[10 ** 400] * 6] * 24])
 @pytest.mark.parametrize("key", ["actions_pred", "actions_gt"])
+@pytest.mark.slow
 def test_importer_refuses_numbers_past_float64(tmp_path, key, value):
     """JSON integers have no limit; one past float64's range is a one-line error naming the field
     (found by the property test above: an OverflowError escaped)."""

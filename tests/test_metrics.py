@@ -267,6 +267,7 @@ def test_aggregate():
     assert agg == {"n": 3, "mean": 2.0, "median": 2.0, "best": 1.0, "worst": 3.0}
 
 
+@pytest.mark.slow
 def test_report_json_on_fixtures(dreamzero_dir):
     out = subprocess.run([sys.executable, "-m", "inspector", "report", str(dreamzero_dir), "--json"],
                          capture_output=True, text=True, timeout=600)

@@ -29,6 +29,8 @@ from inspector.report.entries import MetricsEntry, is_consistent
 from inspector.report.rows import RolloutRow
 from inspector.schema import mismatch
 
+pytestmark = pytest.mark.slow  # the CLI as processes
+
 REPO = Path(__file__).resolve().parents[1]
 DEMO = REPO / "sessions" / "demo"
 # Three rollouts (autoregressive, single-chunk, slowed), each with two views: across two workers.

@@ -25,6 +25,8 @@ from inspector.data.session import open_session
 from inspector.data.video import VideoClip
 from inspector.units import JOINT_LIMITS_RAD, JOINT_NAMES
 
+pytestmark = pytest.mark.slow  # the CLI as processes and a served app
+
 SHUFFLED = ("gripper", "elbow_flex", "shoulder_pan", "wrist_roll", "shoulder_lift", "wrist_flex")
 
 

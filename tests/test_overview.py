@@ -68,6 +68,7 @@ def _catalog(paths, cache: MetricsCache):
 # Rows, without a browser
 
 
+@pytest.mark.slow
 def test_rows_are_computed_once_then_listed_from_the_cache(tmp_path, monkeypatch):
     session = _demo_copy(tmp_path / "demo", "demo", broken_tag="bias_elbow")
     cache = MetricsCache(tmp_path / "cache")

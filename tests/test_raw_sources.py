@@ -31,6 +31,8 @@ from offline_runs import write_run
 from inspector.data.lerobot_writer import EpisodeData, write_lerobot_dataset
 from inspector.data.video import encode_h264
 
+pytestmark = pytest.mark.slow  # imports and reports through the CLI
+
 REPO = Path(__file__).resolve().parents[1]
 
 

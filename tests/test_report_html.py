@@ -19,6 +19,8 @@ from inspector.report.figures import joint_overlay, per_step_rmse, rmse_by_posit
 from inspector.report.html import render_report_html
 from inspector.report.svg import Axes, legend_html, nice_ticks
 
+pytestmark = pytest.mark.slow  # reports written by the CLI
+
 DEMO = Path(__file__).resolve().parents[1] / "sessions" / "demo"
 SINGLE = {"f000": "zeroshot_chunk/f000", "f084": "zeroshot_chunk/f084", "f169": "zeroshot_chunk/f169",
           "train_ep0": "demo/train_ep0"}

@@ -26,6 +26,8 @@ from inspector.report.build import build_report
 from inspector.report.rows import prompt_pairs
 from inspector.report.tasks import Task, run_task
 
+pytestmark = pytest.mark.slow  # large sessions through the CLI
+
 REPO = Path(__file__).resolve().parents[1]
 DEMO = REPO / "sessions" / "demo"
 BEFORE = Path(__file__).resolve().parent / "data" / "report_demo_before_scale.json"

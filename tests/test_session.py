@@ -155,6 +155,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "inspector", *args], capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_cli_import_prints_one_line_per_rollout(dz_layout, tmp_path):
     out = _cli("import", "dreamzero-so101", str(dz_layout), "-o", str(tmp_path / "s"))
     assert out.returncode == 0, out.stderr
@@ -164,6 +165,7 @@ def test_cli_import_prints_one_line_per_rollout(dz_layout, tmp_path):
     assert "60 chunk(s) x 24 steps" in next(line for line in lines if line.startswith("ep000_train:"))
 
 
+@pytest.mark.slow
 def test_cli_bad_input_is_one_line_exit_2(tmp_path):
     out = _cli("import", "dreamzero-so101", str(tmp_path / "missing"), "-o", str(tmp_path / "s"))
     assert out.returncode == 2
@@ -171,6 +173,7 @@ def test_cli_bad_input_is_one_line_exit_2(tmp_path):
     assert not (tmp_path / "s").exists()
 
 
+@pytest.mark.slow
 def test_failed_import_leaves_no_partial_session(dz_layout, tmp_path):
     src = tmp_path / "src"
     import shutil
@@ -183,6 +186,7 @@ def test_failed_import_leaves_no_partial_session(dz_layout, tmp_path):
     assert not (tmp_path / "s").exists() and not list(tmp_path.glob(".s.*"))
 
 
+@pytest.mark.slow
 def test_cli_info_json_session_and_dataset(dz_layout_session, lerobot_dir):
     out = _cli("info", str(dz_layout_session), "--json")
     info = json.loads(out.stdout)
@@ -210,6 +214,7 @@ def test_every_public_name_resolves():
         inspector.not_a_name  # noqa: B018
 
 
+@pytest.mark.slow
 def test_info_on_a_session_says_model_units_and_gt(tmp_path):
     import subprocess
     import sys
@@ -275,6 +280,7 @@ def test_rollout_overwrite_replaces_only_a_rollout(tmp_path):
     assert not [p for p in (root / "rollouts").iterdir() if p.name.startswith(".")]
 
 
+@pytest.mark.slow
 def test_concurrent_imports_to_one_destination_leave_no_staging(dz_layout, tmp_path):
     """Imports racing to one destination: one session results (complete), every other import
     exits 2 with one line, and no ``.<name>.*.partial`` staging directory (or ``.old-``) is left."""

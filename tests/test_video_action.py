@@ -297,6 +297,7 @@ def _wait_for_agreements(tab: Any, views: tuple[str, ...]) -> None:
         time.sleep(0.05)
 
 
+@pytest.mark.slow
 def test_the_app_plots_both_gt_times_marks_the_split_and_reads_the_lag(tmp_path: Path) -> None:
     import re
     import time
@@ -319,6 +320,7 @@ def test_the_app_plots_both_gt_times_marks_the_split_and_reads_the_lag(tmp_path:
         assert read is not None and float(read.group(1)) == pytest.approx(0.8, abs=1.0 / FPS)
 
 
+@pytest.mark.slow
 def test_a_frame_match_that_fails_in_the_app_is_named_on_the_plot(tmp_path: Path, monkeypatch) -> None:
     import time
 
@@ -417,6 +419,7 @@ def test_the_overview_table_has_a_median_lag_column() -> None:
     assert ">lag front<" in html and ">+0.80<" in html
 
 
+@pytest.mark.slow
 def test_gt_thumbnails_kept_from_an_earlier_window_match_as_a_fresh_read(monkeypatch, tmp_path: Path) -> None:
     """Single chunks of one episode start at different GT frames; the thumbnails of the episode
     read for the earliest serve the later ones (the tail of its window) with the same match."""
@@ -489,6 +492,7 @@ def _report(paths: list[Path], *flags: str) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=600)
 
 
+@pytest.mark.slow
 def test_a_frozen_video_is_called_frozen_and_has_no_lag(demo_frozen: Path, tmp_path: Path) -> None:
     out = _report([demo_frozen], "--json", "--html", str(tmp_path / "report.html"))
     assert out.returncode == 0, out.stderr
@@ -511,6 +515,7 @@ def test_a_frozen_video_is_called_frozen_and_has_no_lag(demo_frozen: Path, tmp_p
     assert row is not None and row.group(1).count(">frozen</td>") == 2, "the frozen rollout's lag cells"
 
 
+@pytest.mark.slow
 def test_the_text_report_and_the_overview_say_frozen_and_no_match(demo_frozen: Path) -> None:
     from inspector.app._overview_rows import OverviewRow
     from inspector.app._overview_table import Query, select_rows, table_html
@@ -557,6 +562,7 @@ def test_the_recording_says_the_video_is_frozen_and_logs_no_lag(demo_frozen: Pat
     assert any(e[0].startswith("front: frozen: the video stands still") for e in events)
 
 
+@pytest.mark.slow
 def test_frames_without_a_lag_read_no_match_in_the_recording(tmp_path: Path) -> None:
     """bias_elbow's joints leave the GT path (more than JOINT_MATCH_MAX from every GT pose): its
     frames there have no lag; the recording marks them "no match" instead of leaving a gap."""
@@ -579,6 +585,7 @@ def test_frames_without_a_lag_read_no_match_in_the_recording(tmp_path: Path) -> 
     assert "nan" not in rec.static(L.DESCRIPTION, "TextDocument:text")[0][0]
 
 
+@pytest.mark.slow
 def test_the_app_reads_frozen_and_no_match_never_nan(demo_frozen: Path) -> None:
     from test_app import key
 
