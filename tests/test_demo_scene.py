@@ -15,6 +15,8 @@ scene_mod = pytest.importorskip(
 
 from inspector.units import Units, limits_in_units  # noqa: E402
 
+pytestmark = pytest.mark.slow  # MuJoCo physics and offscreen rendering
+
 CAMERAS = scene_mod.CAMERAS
 REST = scene_mod.REST_POSE
 # The arm reaching forward and down, jaws open: far from the rest pose in every joint.

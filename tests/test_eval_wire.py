@@ -207,6 +207,7 @@ def _messages() -> st.SearchStrategy[bytes]:
 
 @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(_messages())
+@pytest.mark.slow
 def test_the_decoder_takes_anything(message: bytes) -> None:
     """Whatever a server sends decodes to boolean or numeric arrays whose bytes fit their shape,
     or is one ValueError; never an object array (whose use would read the bytes as pointers and

@@ -45,6 +45,7 @@ def test_gripper_frame_at_zero():
     np.testing.assert_allclose(p, [0.391, 0.0, 0.227], atol=1e-3)
 
 
+@pytest.mark.slow
 def test_fk_matches_yourdfpy_on_random_in_limit_configurations():
     rng = np.random.default_rng(0)
     lo = np.array([JOINT_LIMITS_RAD[j][0] for j in JOINT_NAMES])
@@ -61,6 +62,7 @@ def test_fk_matches_yourdfpy_on_random_in_limit_configurations():
     assert worst <= 1e-6
 
 
+@pytest.mark.slow
 def test_fk_matches_pytorch_kinematics_for_every_link():
     """A second independent parser of the same URDF (its chain is parsed in float32: ~5e-7 m)."""
     torch = pytest.importorskip("torch")

@@ -112,6 +112,7 @@ def layer_of(name: str) -> int:
     raise AssertionError(f"{name} is in no layer; add its package to LAYERS")
 
 
+@pytest.mark.slow
 def test_no_import_cycles() -> None:
     assert find_cycle(import_graph()) is None, " -> ".join(find_cycle(import_graph()) or [])
 

@@ -109,6 +109,7 @@ def test_tasks(dataset_root: Path) -> None:
         assert [ds.tasks[i] for i in task_index] == [ep.task]
 
 
+@pytest.mark.slow
 def test_video_frames_line_up(dataset_root: Path) -> None:
     ds = LeRobotDataset(dataset_root)
     for info in ds.episodes:

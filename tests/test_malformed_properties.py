@@ -134,6 +134,7 @@ def _report_row_or_clean_error(rollout: Any) -> None:
     "units": st.fixed_dictionaries({"arm": st.sampled_from(["degrees", "range100", "rad"])}),
     "joint_names": st.permutations(list(JOINT_NAMES)),
     "gt_source": st.fixed_dictionaries({"dataset": _json_scalars})}))
+@pytest.mark.slow
 def test_session_json_property(session_json: bytes) -> None:
     """Any ``session.json``: the session opens (its valid rollout loads) or ``open_session`` raises
     an InspectorError naming session.json in one line; never another exception."""
@@ -193,6 +194,7 @@ _FUZZ = {
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(broken=st.sampled_from(["nothing", *_FUZZ]), data=st.data(), twin=st.booleans(), with_dataset=st.booleans())
+@pytest.mark.slow
 def test_rollout_property(broken: str, data: st.DataObject, twin: bool, with_dataset: bool) -> None:
     """A valid-but-varied rollout with one of its files (``rollout.json``, ``actions.npy``,
     ``gt/actions.npy``, ``states.npy``) replaced by arbitrary bytes, with or without a GT dataset:

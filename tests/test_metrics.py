@@ -55,6 +55,7 @@ def test_video_psnr_front_f084_matches_meta(imported_session):
     assert psnr == pytest.approx(r.extra["reference_metrics"]["video_psnr_db"], abs=0.3)
 
 
+@pytest.mark.slow
 def test_frames_shown_while_comparing_do_not_change_the_psnr(imported_session):
     """The app compares a view while it caches the frames it shows (``on_imagined``/``on_gt``),
     reusing the GT frame scaled for display: the PSNR is the one computed without them, and

@@ -123,6 +123,7 @@ def test_importer_reads_every_fixture_dir(imported_session):
     assert 15 < float(np.mean(psnr)) < 22  # a mosaic read as GT would score 4-10 dB
 
 
+@pytest.mark.slow
 def test_importer_reads_the_layout_made_from_the_demo(dz_layout_session):
     """Every kind of DreamZero-SO101 source directory (``dreamzero_layout.py``): autoregressive,
     single chunk with per-view clips, mosaic sample."""

@@ -58,6 +58,7 @@ def _write(root: Path, shows: np.ndarray, gt_frames: np.ndarray, gt_joints: np.n
 
 
 @pytest.mark.parametrize("shift", [6, -4, 0])
+@pytest.mark.slow
 def test_a_clip_shifted_by_n_frames_reads_n_over_fps(tmp_path: Path, shift: int) -> None:
     n_gt = N_STEPS + 12
     times = np.arange(n_gt, dtype=np.float64)
@@ -243,6 +244,7 @@ def test_thumbnails_taken_in_batches_equal_thumbnails_taken_one_by_one() -> None
     assert not one_by_one[-1].any()  # one flat colour: all zeros, which matches nothing
 
 
+@pytest.mark.slow
 def test_the_recording_holds_both_gt_times_the_lag_and_the_split(tmp_path: Path) -> None:
     from test_export import Recording, rrd_verify
 
@@ -543,6 +545,7 @@ def test_the_text_report_and_the_overview_say_frozen_and_no_match(demo_frozen: P
     assert ">frozen<" in html and ">no match<" in html
 
 
+@pytest.mark.slow
 def test_the_recording_says_the_video_is_frozen_and_logs_no_lag(demo_frozen: Path, tmp_path: Path) -> None:
     from test_export import Recording, rrd_verify
 
