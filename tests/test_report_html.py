@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from browser import canvas_is_drawn, launch, skip_reason, wait_until
+from browser import canvas_is_drawn, skip_reason, wait_until
 
 from inspector.report.build import build_report
 from inspector.report.figures import joint_overlay, per_step_rmse, rmse_by_position
@@ -334,70 +334,67 @@ _reason = skip_reason()
 @pytest.mark.browser
 @pytest.mark.slow
 @pytest.mark.skipif(_reason is not None, reason=_reason or "")
-def test_report_opens_offline_in_chromium(demo_page, tmp_path):
-    from playwright.sync_api import sync_playwright
+def test_report_opens_offline_in_chromium(demo_page, tmp_path, browser):
 
     requests, problems = [], []
-    with sync_playwright() as p:
-        browser = launch(p)
-        try:
-            page = browser.new_page(viewport={"width": 1400, "height": 1000})
-            page.on("pageerror", lambda e: problems.append(f"page error: {e}"))
-            page.on("console", lambda m: problems.append(f"console {m.type}: {m.text}")
-                    if m.type in ("error", "warning") else None)
+    page = browser.new_page(viewport={"width": 1400, "height": 1000})
+    try:
+        page.on("pageerror", lambda e: problems.append(f"page error: {e}"))
+        page.on("console", lambda m: problems.append(f"console {m.type}: {m.text}")
+                if m.type in ("error", "warning") else None)
 
-            def route(r):
-                if r.request.url.startswith("file://"):
-                    r.continue_()
-                else:
-                    requests.append(r.request.url)
-                    r.abort()
-            page.route("**/*", route)
-            page.goto(demo_page.as_uri())
-            page.wait_for_selector("html[data-ready]", timeout=30_000)
+        def route(r):
+            if r.request.url.startswith("file://"):
+                r.continue_()
+            else:
+                requests.append(r.request.url)
+                r.abort()
+        page.route("**/*", route)
+        page.goto(demo_page.as_uri())
+        page.wait_for_selector("html[data-ready]", timeout=30_000)
 
-            # every figure drew: visible lines or dots, and pixels that are not a flat colour
-            shot = page.screenshot(full_page=True)
-            for key, n_charts in [("per-step-rmse", 1), ("rmse-by-position", 1), ("joint-overlay", 6), ("drift", 2)]:
-                fig = page.locator(f"#{key}")
-                assert fig.locator("svg.chart").count() == n_charts, key
-                marks = fig.locator("svg.chart path.ln, svg.chart circle.pt")
-                assert marks.count() > 0, key
-                box = marks.first.bounding_box()
-                assert box and (box["width"] > 1 or box["height"] > 1), key
-                fb = fig.bounding_box()
-                scroll = page.evaluate("() => window.scrollY")
-                region = (int(fb["x"]), int(fb["y"] + scroll), int(fb["x"] + fb["width"]), int(fb["y"] + scroll + fb["height"]))
-                assert canvas_is_drawn(shot, region), key
-            (tmp_path / "report.png").write_bytes(shot)
+        # every figure drew: visible lines or dots, and pixels that are not a flat colour
+        shot = page.screenshot(full_page=True)
+        for key, n_charts in [("per-step-rmse", 1), ("rmse-by-position", 1), ("joint-overlay", 6), ("drift", 2)]:
+            fig = page.locator(f"#{key}")
+            assert fig.locator("svg.chart").count() == n_charts, key
+            marks = fig.locator("svg.chart path.ln, svg.chart circle.pt")
+            assert marks.count() > 0, key
+            box = marks.first.bounding_box()
+            assert box and (box["width"] > 1 or box["height"] > 1), key
+            fb = fig.bounding_box()
+            scroll = page.evaluate("() => window.scrollY")
+            region = (int(fb["x"]), int(fb["y"] + scroll), int(fb["x"] + fb["width"]), int(fb["y"] + scroll + fb["height"]))
+            assert canvas_is_drawn(shot, region), key
+        (tmp_path / "report.png").write_bytes(shot)
 
-            # the table: one row per rollout, sortable, filterable
-            rows = page.locator("#rollouts tbody tr")
-            assert rows.count() == 13
-            headers = page.locator("#rollouts thead th")
-            names = [h.strip() for h in headers.all_inner_texts()]
-            col = names.index("RMSE")
+        # the table: one row per rollout, sortable, filterable
+        rows = page.locator("#rollouts tbody tr")
+        assert rows.count() == 13
+        headers = page.locator("#rollouts thead th")
+        names = [h.strip() for h in headers.all_inner_texts()]
+        col = names.index("RMSE")
 
-            def column() -> list[float]:
-                return [float(t) for t in page.eval_on_selector_all(
-                    "#rollouts tbody tr:not([hidden])", f"rs => rs.map(r => r.cells[{col}].textContent)")]
-            headers.nth(col).click()
-            assert column() == sorted(column()) and headers.nth(col).get_attribute("aria-sort") == "ascending"
-            headers.nth(col).click()
-            assert column() == sorted(column(), reverse=True)
-            assert page.eval_on_selector("#rollouts tbody tr", "r => r.cells[0].textContent") == "tempo_0.8x"
-            page.fill("#filter", "single")
-            wait_until(lambda: page.text_content("#shown") == "6", what="the filter")
-            assert len(column()) == 6
-            page.fill("#filter", "")
+        def column() -> list[float]:
+            return [float(t) for t in page.eval_on_selector_all(
+                "#rollouts tbody tr:not([hidden])", f"rs => rs.map(r => r.cells[{col}].textContent)")]
+        headers.nth(col).click()
+        assert column() == sorted(column()) and headers.nth(col).get_attribute("aria-sort") == "ascending"
+        headers.nth(col).click()
+        assert column() == sorted(column(), reverse=True)
+        assert page.eval_on_selector("#rollouts tbody tr", "r => r.cells[0].textContent") == "tempo_0.8x"
+        page.fill("#filter", "single")
+        wait_until(lambda: page.text_content("#shown") == "6", what="the filter")
+        assert len(column()) == 6
+        page.fill("#filter", "")
 
-            # hovering a row lights up its curves
-            page.hover('#rollouts tbody tr:has-text("bias_elbow")')
-            key = page.get_attribute('#rollouts tbody tr:has-text("bias_elbow")', "data-key")
-            wait_until(lambda: page.locator(f'#drift path.ln.on[data-key="{key}"]').count() == 2,
-                       what="the highlighted curves")
-        finally:
-            browser.close()
+        # hovering a row lights up its curves
+        page.hover('#rollouts tbody tr:has-text("bias_elbow")')
+        key = page.get_attribute('#rollouts tbody tr:has-text("bias_elbow")', "data-key")
+        wait_until(lambda: page.locator(f'#drift path.ln.on[data-key="{key}"]').count() == 2,
+                   what="the highlighted curves")
+    finally:
+        page.close()
     assert requests == [], f"the page tried the network: {requests}"
     assert problems == [], problems
 
@@ -433,35 +430,31 @@ def test_written_outputs_get_the_umasks_mode(tmp_path, umask):
 
 @pytest.mark.browser
 @pytest.mark.skipif(_reason is not None, reason=_reason or "")
-def test_the_rollout_table_fits_a_1400_px_window(demo_report, tmp_path):
+def test_the_rollout_table_fits_a_1400_px_window(demo_report, tmp_path, browser):
     """Every column, the prompt's included, within a 1400 px window: no horizontal scroll; a long
     prompt is cut to one line, the whole of it in the cell's tooltip."""
-    from playwright.sync_api import sync_playwright
-
     report = copy.deepcopy(demo_report)
     long_prompt = "Pick the red cube, lift it over the blue bowl, then " * 6 + "place it in the bowl"
     report["rollouts"][0]["prompt"] = long_prompt
     out = tmp_path / "report.html"
     out.write_text(render_report_html(report))
-    with sync_playwright() as p:
-        browser = launch(p)
-        try:
-            page = browser.new_page(viewport={"width": 1400, "height": 900})
-            page.goto(out.as_uri())
-            page.wait_for_selector("html[data-ready]", timeout=30_000)
-            page.locator("#rollouts").scroll_into_view_if_needed()
-            page.screenshot(path=str(tmp_path / "table.png"))
-            got = page.evaluate("""() => {
-                const table = document.querySelector('#rollouts'), wrap = table.parentElement;
-                const head = [...table.querySelectorAll('thead th')].find(th => th.textContent.trim() === 'prompt');
-                const cell = table.querySelector('tbody tr td.prompt');
-                return {right: head.getBoundingClientRect().right, width: head.getBoundingClientRect().width,
-                        view: document.documentElement.clientWidth, wrapRight: wrap.getBoundingClientRect().right,
-                        scroll: wrap.scrollWidth - wrap.clientWidth, cellTitle: cell.title,
-                        cellHeight: cell.getBoundingClientRect().height, cut: cell.scrollWidth > cell.clientWidth};
-            }""")
-        finally:
-            browser.close()
+    page = browser.new_page(viewport={"width": 1400, "height": 900})
+    try:
+        page.goto(out.as_uri())
+        page.wait_for_selector("html[data-ready]", timeout=30_000)
+        page.locator("#rollouts").scroll_into_view_if_needed()
+        page.screenshot(path=str(tmp_path / "table.png"))
+        got = page.evaluate("""() => {
+            const table = document.querySelector('#rollouts'), wrap = table.parentElement;
+            const head = [...table.querySelectorAll('thead th')].find(th => th.textContent.trim() === 'prompt');
+            const cell = table.querySelector('tbody tr td.prompt');
+            return {right: head.getBoundingClientRect().right, width: head.getBoundingClientRect().width,
+                    view: document.documentElement.clientWidth, wrapRight: wrap.getBoundingClientRect().right,
+                    scroll: wrap.scrollWidth - wrap.clientWidth, cellTitle: cell.title,
+                    cellHeight: cell.getBoundingClientRect().height, cut: cell.scrollWidth > cell.clientWidth};
+        }""")
+    finally:
+        page.close()
     assert got["scroll"] <= 0, got  # no horizontal scroll
     assert got["right"] <= got["wrapRight"] <= got["view"], got  # the prompt column's right edge in view
     assert got["width"] >= 120, got  # and room to read it
