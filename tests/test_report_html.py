@@ -335,7 +335,6 @@ _reason = skip_reason()
 @pytest.mark.slow
 @pytest.mark.skipif(_reason is not None, reason=_reason or "")
 def test_report_opens_offline_in_chromium(demo_page, tmp_path, browser):
-
     requests, problems = [], []
     page = browser.new_page(viewport={"width": 1400, "height": 1000})
     try:
