@@ -56,7 +56,7 @@ def describe(path: Path, calibration: str | None = None) -> dict[str, Any]:
 def _rollout_info(r: Any) -> dict[str, Any]:
     return {"tag": r.tag, "kind": r.kind, "n_chunks": r.n_chunks, "horizon": r.horizon,
             "executed_per_chunk": r.executed_per_chunk, "views": list(r.views),
-            "has_gt_joints": r.has_gt_joints or _dataset_has_episode(r)}
+            "has_gt_joints": r.has_gt_joints or _dataset_has_episode(r), "video_only": not r.has_joints}
 
 
 def _dataset_has_episode(r: Any) -> bool:
@@ -92,7 +92,7 @@ def format_info(info: dict[str, Any]) -> str:
         executed = r["executed_per_chunk"] if r["kind"] in CHAINED_KINDS else "-"
         lines.append(f"{r['tag']:<{width}} {r['kind']:<16} {r['n_chunks']:>6} {r['horizon']:>7} "
                      f"{executed:>4}  {'yes' if r['has_gt_joints'] else 'no':<9}  "
-                     f"{', '.join(r['views'])}")
+                     f"{', '.join(r['views'])}{'  (video only: no joints)' if r.get('video_only') else ''}")
     for tag, err in info.get("errors", {}).items():
         lines.append(f"{tag:<{width}} error: {err}")
     return "\n".join(lines)
