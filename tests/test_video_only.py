@@ -176,3 +176,19 @@ def test_export_writes_the_videos_and_verifies(evaluation, tmp_path):
     assert files
     for f in files:
         rrd_verify(f)
+
+
+def test_compare_pairs_video_only_rows_by_psnr_and_success(evaluation, tmp_path):
+    """B's predicted first view is another picture altogether: A wins every pair on PSNR."""
+    write_eval(tmp_path / "b", {("pusht", 0): [True, True], ("pusht", 1): [False]}, steps=STEPS, record=False)
+    out = cli("compare", "--json", "--no-cache", evaluation, tmp_path / "b")
+    assert out.returncode == 0, out.stderr
+    c = json.loads(out.stdout)
+    assert len(c["pairs"]) == 3 and c["summary"]["n_compared"] == 0  # no RMSE on either side
+    psnr = c["video_psnr_db"]["render"]
+    assert (psnr["n_compared"], psnr["a_better"], psnr["b_better"]) == (3, 3, 0)
+    deltas = [p["delta_video_psnr_db"]["render"] for p in c["pairs"]]
+    assert psnr["mean_delta_db"] == pytest.approx(np.mean(deltas)) and max(deltas) < 0
+    assert c["success"] == {"n_compared": 3, "both": 1, "only_a": 1, "only_b": 1, "neither": 0}
+    text = cli("compare", "--no-cache", evaluation, tmp_path / "b").stdout
+    assert "PSNR render over 3 pair(s)" in text and "only A 1, only B 1" in text
