@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InspectorError
-from .importers import dreamzero_offline, lerobot_eval
+from .importers import dreamzero_offline, dreamzero_served, lerobot_eval
 from .importers.groot_dreams import LAYOUT as GROOT_DREAMS
 from .importers.groot_dreams import NeuralTrajectories, describe_layout, format_layout, is_groot_dreams
 from .lerobot_dataset import INFO_PATH, LeRobotDataset, is_lerobot_dataset
@@ -50,6 +50,8 @@ def describe(path: Path, calibration: str | None = None) -> dict[str, Any]:
         return dreamzero_offline.describe(path)
     if lerobot_eval.is_eval_output(path):
         return lerobot_eval.describe(path)
+    if dreamzero_served.is_served(path):
+        return dreamzero_served.describe(path)
     raise no_layout_fits(path)
 
 
@@ -70,6 +72,8 @@ def format_info(info: dict[str, Any]) -> str:
         return format_layout(info)
     if info["format"] == dreamzero_offline.FORMAT:
         return dreamzero_offline.format_description(info)
+    if info["format"] == dreamzero_served.FORMAT:
+        return dreamzero_served.format_description(info)
     if info["format"] == lerobot_eval.FORMAT:
         return lerobot_eval.format_description(info)
     if info["format"] == "lerobot":
