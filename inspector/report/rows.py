@@ -13,6 +13,7 @@ from collections.abc import Iterable, Mapping
 from typing import Annotated, Any, TypedDict, cast
 
 import numpy as np
+import numpy.typing as npt
 
 from ..analysis import metrics
 from ..analysis.timeline import RolloutTimeline
@@ -87,6 +88,7 @@ class RolloutRow(TypedDict):
     limit_violations: LimitRecord | None
     worst_chunk: WorstChunk | None
     video_psnr_db: dict[str, float]
+    video_per_chunk: dict[str, VideoPerChunk]  # per view; imagined frame f in chunk f // frames_per_chunk
     video_action: dict[str, ViewAgreementJson] | None  # per view; null with video_action_note saying why
     video_action_note: str | None
     post_episode_chunks: int | None
@@ -94,6 +96,25 @@ class RolloutRow(TypedDict):
     gt_warning: str | None
     chunk_joints: ChunkJoints | None
     outcome: dict[str, Any] | None  # a simulated evaluation's verdict (lerobot-eval): success, rewards, task
+
+
+class VideoPerChunk(TypedDict):
+    psnr_db: list[float | None]  # per chunk: mean over its imagined frames with a GT frame; null: none
+    ssim: list[float | None] | None  # likewise; null where SSIM was not computed
+
+
+def video_per_chunk(tl: RolloutTimeline, vm: VideoMetrics) -> VideoPerChunk:
+    """A view's PSNR (and SSIM) per chunk: the mean over each chunk's imagined frames (frame f
+    belongs to chunk f // frames_per_chunk; a leading frame past the last chunk to the last)."""
+    chunk = np.minimum(np.arange(vm.psnr_db.size) // max(1, tl.rollout.frames_per_chunk), tl.n_chunks - 1)
+
+    def means(values: npt.NDArray[np.float64]) -> list[float | None]:
+        out: list[float | None] = []
+        for c in range(tl.n_chunks):
+            v = values[(chunk == c) & np.isfinite(values)]
+            out.append(round(float(v.mean()), 6) if v.size else None)
+        return out
+    return {"psnr_db": means(vm.psnr_db), "ssim": means(vm.ssim) if vm.ssim is not None else None}
 
 
 def limit_steps(row: Mapping[str, Any]) -> int | None:
@@ -180,6 +201,8 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> d
         "limit_violations": limit_record(tl.limit_summary(), tl.limit_margin_deg) if joints else None,
         "worst_chunk": {"chunk": worst, "by": worst_by} if joints else None,
         "video_psnr_db": psnr,
+        "video_per_chunk": {view: video_per_chunk(tl, vm) for view, vm in sorted(video.items())
+                            if vm.mean_psnr_db is not None},
         "video_action": agreement,
         "video_action_note": agreement_note,
         "post_episode_chunks": post_chunks,
