@@ -163,3 +163,30 @@ def test_timing_flags_move_the_pairing(run, tmp_path):
     assert [t for t, _ in stamps(r.root / "gt" / "video" / "wrist.mp4")] == expected
     assert np.array_equal(r.extra["timing"]["frame_steps"], [4 * k + 0.5 * (j + 1) for k in range(CALLS)
                                                              for j in range(8)])
+
+
+def test_a_lerobot_recording_is_the_gt_and_its_actions_the_executed_arm(tmp_path):
+    """The SO-101 mosaic (chosen by its 640x352 frames) against episode 1 of a dataset written by
+    LeRobot, recorded at 30 fps: the control rate defaults to it."""
+    dataset = Path(__file__).parent / "data" / "lerobot" / "so101_v21"
+    out = tmp_path / "video_pred_output"
+    save_prediction(out, "Pick the red cube", served_frames(3, layout="so101"), WHEN)
+    dest, errors = import_served(out, tmp_path / "s", dataset=dataset, episode=1, log=lambda _: None)
+    assert errors == {}
+    r = next(iter(open_session(dest).rollouts.values()))
+    assert r.views == ["front", "gripper", "top"] and r.gt_views == ["front"] and r.episode_index == 1
+    assert stamps(r.root / "video" / "top.mp4") == [(f + 1, 1) for f in range(24)]
+    from inspector.data.lerobot_dataset import LeRobotDataset
+
+    episode = LeRobotDataset(dataset).episode(1)
+    assert np.array_equal(r.gt_actions, episode.action) and r.fps == 30.0
+    expected = [8 * k + 3 * (j + 1) for k in range(3) for j in range(8)]
+    assert r.extra["recording"]["frame_of_imagined"] == expected
+    recorded = dict(episode.video("front").iter_frames())
+    carried = [rgb for _, rgb in VideoClip(r.root / "gt" / "video" / "front.mp4").iter_frames()]
+    assert len(carried) == len(expected)
+    def distance(shift: int) -> float:  # of the carried frames to the recorded ones ``shift`` steps on
+        return float(np.mean([np.abs(rgb.astype(int) - recorded[t + shift].astype(int)).mean()
+                              for rgb, t in zip(carried, expected)]))
+    by_shift = {shift: distance(shift) for shift in range(-3, 4)}
+    assert min(by_shift, key=by_shift.get) == 0
