@@ -190,3 +190,16 @@ def test_a_lerobot_recording_is_the_gt_and_its_actions_the_executed_arm(tmp_path
                               for rgb, t in zip(carried, expected)]))
     by_shift = {shift: distance(shift) for shift in range(-3, 4)}
     assert min(by_shift, key=by_shift.get) == 0
+
+
+def test_export_of_a_served_session_verifies(imported, tmp_path):
+    from test_export import rrd_verify
+
+    tag = "000000_put_the_cube_in_the_bowl_03_14_15_09_26"
+    out = cli("export", imported.root, "-o", tmp_path / "dream.rrd", "--no-cache", "--rollout", tag)
+    assert out.returncode == 0, out.stderr
+    files = sorted((tmp_path / "dream.rrd").glob("*.rrd")) if (tmp_path / "dream.rrd").is_dir() \
+        else [tmp_path / "dream.rrd"]
+    assert files
+    for f in files:
+        rrd_verify(f)
