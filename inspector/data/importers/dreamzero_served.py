@@ -241,20 +241,25 @@ class Recording:
     units: Units | None = None
     episode: int | None = None
     warnings: list[str] = field(default_factory=list)
+    _held: dict[tuple, dict[int, npt.NDArray[np.uint8]]] = field(default_factory=dict, repr=False)
 
     def frames(self, view: str, wanted: list[int]) -> Iterator[npt.NDArray[np.uint8]]:
-        """The recording's frames ``wanted`` (any order, repeats allowed) of ``view``, decoded once."""
-        keep = set(wanted)
-        held: dict[int, npt.NDArray[np.uint8]] = {}
+        """The recording's frames ``wanted`` (any order, repeats allowed) of ``view``: each file
+        decoded once for every view it tiles (only the frames wanted are kept)."""
         clip = self.clips[view]
-        for i, rgb in clip.iter_frames():
-            if i in keep:
-                held[i] = self.grid.cut(rgb, view) if self.grid is not None else rgb
-            if i >= max(keep):
-                break
+        held = self._held.get(clip.key)
+        if held is None:
+            keep = set(wanted)
+            held = {}
+            for i, rgb in clip.iter_frames():
+                if i in keep:
+                    held[i] = rgb
+                if i >= max(keep):
+                    break
+            self._held = {clip.key: held}  # one file's frames at a time
         for i in wanted:
             require(i in held, clip.path, f"frame {i}: not decoded (the file holds fewer frames than it says)")
-            yield held[i]
+            yield self.grid.cut(held[i], view) if self.grid is not None else held[i]
 
 
 def client_recording(path: Path) -> Recording:
@@ -301,7 +306,9 @@ def rollout_args(video: ServedVideo, grid: Grid | None, timing: Timing, recordin
     control_hz = timing.control_hz or (recording.fps if recording is not None else CONTROL_HZ)
     scratch.mkdir(parents=True)
     videos: dict[str, Path] = {}
-    for view in grid.views:  # decoded once per view: one frame in memory at a time
+    # decoded once per view, one frame in memory at a time (holding the tiles to decode them once
+    # saved no CPU time, measured: the H.264 encodes dominate, and cost ~200 MB for 30 calls)
+    for view in grid.views:
         videos[view] = scratch / f"{view}.mp4"
         encode_h264(videos[view], (grid.cut(rgb, view) for i, rgb in VideoClip(video.path).iter_frames()
                                    if i >= LEADING_FRAMES), SERVED_FPS)
