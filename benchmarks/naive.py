@@ -5,12 +5,16 @@ script (and this project before its scale work) does.
     python benchmarks/naive.py export SESSION TAG OUT.rrd
     python benchmarks/naive.py export-all SESSION OUT_DIR
     python benchmarks/naive.py eval SERVER DATASET OUT_SESSION -n N
+    python benchmarks/naive.py served VIDEO_PRED_OUTPUT RUN_DIR
 
 ``report``: every rollout opened up front, one timeline each, every clip decoded whole into
 memory and kept with its rollout, PSNR on the arrays, all of it held until the end.
 ``export``: the clips decoded whole, then one ``rr.log`` of an ``rr.Image`` per frame and view.
 ``export-all``: every rollout of a session written by today's exporter, one after another in
 this one process (what ``inspector export SESSION -o DIR`` did before it used worker processes).
+``served``: DreamZero served predictions against the client's recordings: every served video and
+every recording decoded whole and held, the views cut, each imagined frame's recording frame
+picked by the same timing, PSNR and SSIM on the arrays.
 ``eval``: a first evaluation loop against a policy server: each sample's frames read alone
 (``Episode.frame``: a fresh container and a seek), resized with PIL, sent, written, one after
 another; prints the client's time per sample (outside the server's replies) as JSON.
@@ -122,6 +126,36 @@ def naive_eval(server: str, dataset: str, out: str, n: int) -> dict:
     return {"samples": len(client), "client_ms_p50": float(np.percentile(client, 50) * 1000)}
 
 
+def naive_served(served_dir: str, run_dir: str) -> dict:
+    from pathlib import Path
+
+    from PIL import Image
+
+    from inspector.analysis import metrics
+    from inspector.data.importers import dreamzero_served as served
+    from inspector.data.video import VideoClip
+
+    kept, rows = [], []
+    timing = served.Timing()
+    for k, video in enumerate(served.find_served(Path(served_dir))):
+        frames = VideoClip(video.path).decode(max_bytes=2**40)[1:]
+        recording = VideoClip(Path(run_dir) / f"episode_{k}.mp4").decode(max_bytes=2**40)
+        grid, client = served.parse_grid("droid"), served.parse_grid(served.CLIENT_GRID)
+        steps = timing.frame_steps(len(frames) // timing.frames_per_call)
+        wanted = [round(float(s)) for s in steps]
+        paired = next((i for i, w in enumerate(wanted) if w >= len(recording)), len(wanted))
+        psnr, ssim = {}, {}
+        for view in grid.views:
+            imagined = np.stack([grid.cut(f, view) for f in frames[:paired]])
+            gt = np.stack([client.cut(recording[w], view) for w in wanted[:paired]])
+            gt = np.stack([np.asarray(Image.fromarray(g).resize(imagined.shape[2:0:-1])) for g in gt])
+            psnr[view] = float(np.mean(metrics.psnr(imagined, gt)))
+            ssim[view] = float(np.mean(metrics.ssim(imagined, gt)))
+        kept.append((frames, recording))
+        rows.append({"tag": video.tag, "psnr": psnr, "ssim": ssim})
+    return {"rollouts": rows}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="what", required=True)
@@ -135,6 +169,9 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("export-all")
     p.add_argument("session")
     p.add_argument("out_dir")
+    p = sub.add_parser("served")
+    p.add_argument("served_dir")
+    p.add_argument("run_dir")
     p = sub.add_parser("eval")
     p.add_argument("server")
     p.add_argument("dataset")
@@ -143,6 +180,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.what == "eval":
         print(json.dumps(naive_eval(args.server, args.dataset, args.out, args.n)))
+    elif args.what == "served":
+        print(json.dumps(naive_served(args.served_dir, args.run_dir)))
     elif args.what == "report":
         print(json.dumps(naive_report(args.session, args.n)))
     elif args.what == "export-all":

@@ -301,6 +301,33 @@ def bench_groot(tmp: Path, quick: bool) -> list[Figure]:
     return figures
 
 
+def bench_served(tmp: Path, quick: bool) -> list[Figure]:
+    """DreamZero served predictions against the client's recordings (DROID tiles, 640x320 at
+    5 fps; recordings 672x224 at 15 fps): ``import dreamzero-served --recording`` then ``report``,
+    as a user runs them, vs decoding every video whole and comparing the arrays."""
+    sys.path.insert(0, str(REPO / "tests"))
+    from served_layout import save_client_episode, save_prediction, served_frames
+
+    n, calls = (3, 15) if quick else (8, 30)  # 30 calls: 241 frames, a 240-step episode
+    out, runs = tmp / "served" / "video_pred_output", tmp / "served" / "runs"
+    for k in range(n):
+        save_prediction(out, f"put the cube in the bowl {k}", served_frames(calls))
+        save_client_episode(runs, k, 8 * calls)
+    imported = run_process(inspector_cmd("import", "dreamzero-served", out, "-o", tmp / "served_session",
+                                         "--recording", runs))
+    report = run_process(inspector_cmd("report", tmp / "served_session", "--json"), env=fresh_cache(tmp))
+    naive = run_process([sys.executable, str(REPO / "benchmarks" / "naive.py"), "served", str(out), str(runs)])
+    ours = imported.wall_s + report.wall_s
+    if len(json.loads(report.stdout)["rollouts"]) != n:
+        raise AssertionError("the report lost rollouts")
+    return [Figure(f"served_import_report_{n}x{calls}", ours, "s", "< 1 GB, no slower than the baseline",
+                   ours <= naive.wall_s and max(imported.peak_mib, report.peak_mib) < 1024,
+                   max(imported.peak_mib, report.peak_mib), naive.wall_s, naive.peak_mib,
+                   f"{n} served videos of {calls} calls, each with its recording: import + report (PSNR and SSIM "
+                   "per chunk, SSIM ~36 ms a frame of each view); baseline: every video decoded whole and held, "
+                   "PSNR and SSIM on the arrays")]
+
+
 def _eval_session(tmp: Path, name: str, n: int, video: bool) -> Path:
     dest = tmp / name
     if not dest.exists():
@@ -935,7 +962,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--latest", action="store_true",
                         help="merge the figures into benchmarks/latest.json (by name) and rewrite the table in "
                              "benchmarks/README.md")
-    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback keys groot eval clock")
+    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback keys groot served eval clock")
     args = parser.parse_args(argv)
 
     figures: list[Figure] = []
@@ -953,6 +980,7 @@ def main(argv: list[str] | None = None) -> int:
             ("playback", lambda: bench_playback(tmp, args.quick)),
             ("keys", lambda: bench_keys(tmp, args.quick)),
             ("groot", lambda: bench_groot(tmp, args.quick)),
+            ("served", lambda: bench_served(tmp, args.quick)),
             ("eval", lambda: bench_eval(tmp, args.quick)),
             ("clock", lambda: bench_clock(tmp, args.quick)),
         ]

@@ -54,11 +54,13 @@ SCHEMA = "inspector.metrics-cache/2"
 IMPORTED_FROM = ".inspector-imported-from.json"
 # The modules whose code decides what an import derives from its source.
 _IMPORT_MODULES = ("data/importers/__init__.py", "data/importers/calibration.py",
-                   "data/importers/dreamzero_offline.py", "data/importers/dreamzero_so101.py",
+                   "data/importers/dreamzero_offline.py", "data/importers/dreamzero_served.py",
+                   "data/importers/dreamzero_so101.py",
                    "data/importers/groot_dreams.py", "data/importers/lerobot_eval.py", "data/session.py")
 _METRIC_MODULES = ("analysis/metrics.py", "analysis/sweep.py", "analysis/video_metrics.py", "analysis/timeline.py",
                    "analysis/video_action.py",
-                   "robot/kinematics.py", "units.py", "data/ground_truth.py", "report/rows.py", "data/video.py")
+                   "robot/kinematics.py", "units.py", "data/ground_truth.py", "report/rows.py", "data/video.py",
+                   "report/tasks.py")  # tasks.py: which rollouts get SSIM
 
 
 def default_dir() -> Path:

@@ -82,6 +82,17 @@ def _cmd_import_eval(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_import_served(args: argparse.Namespace) -> int:
+    from .data.importers.dreamzero_served import Timing, import_served
+
+    timing = Timing(frames_per_call=args.frames_per_call, executed_per_call=args.open_loop_horizon,
+                    steps_per_frame=args.steps_per_frame, control_hz=args.control_hz)
+    dest, _ = import_served(args.src, args.output, views=args.views, timing=timing, dataset=args.dataset,
+                            recording=args.recording, episode=args.episode, overwrite=args.overwrite)
+    print(f"wrote session {dest}")
+    return 0
+
+
 def _cmd_info(args: argparse.Namespace) -> int:
     from .data.info import describe, format_info
 
@@ -353,6 +364,26 @@ def _import_parser(formats: Any, name: str, what: str, src_help: str,
     return p
 
 
+def _served_arguments(p: argparse.ArgumentParser) -> None:
+    from .data.importers import dreamzero_served as served
+
+    p.add_argument("--views", help=f"tile layout: a preset ({', '.join(served.GRIDS)}) or rows by ';', cells "
+                                   "by ',', '-' unused (default: so101 for 640x352 frames, else droid)")
+    p.add_argument("--frames-per-call", type=_whole_number_at_least(1), default=served.FRAMES_PER_CALL,
+                   help=f"imagined frames each inference call adds (default {served.FRAMES_PER_CALL})")
+    p.add_argument("--open-loop-horizon", type=_whole_number_at_least(1), default=served.EXECUTED_PER_CALL,
+                   help=f"actions the client executes per call (default {served.EXECUTED_PER_CALL})")
+    p.add_argument("--steps-per-frame", type=_positive_float, default=served.STEPS_PER_FRAME,
+                   help=f"control steps between imagined frames (default {served.STEPS_PER_FRAME})")
+    p.add_argument("--control-hz", type=_positive_float,
+                   help=f"control rate [Hz] (default: the recording's fps, else {served.CONTROL_HZ:g})")
+    rec = p.add_mutually_exclusive_group()
+    rec.add_argument("--dataset", help="LeRobot dataset recorded while the policy ran (the GT)")
+    rec.add_argument("--recording", help="the client's episode_N.mp4, or the run_sim_eval.py directory of them")
+    p.add_argument("--episode", type=_index, help="episode of the first served video (default 0; the k-th "
+                                                   "pairs with episode + k)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _OneLineParser(
         prog="inspector",
@@ -377,6 +408,9 @@ def build_parser() -> argparse.ArgumentParser:
     off.add_argument("--fps", type=_positive_float, help="action rate [Hz] (default: the dataset's, else 30)")
     _import_parser(fmt, "lerobot-eval", "a lerobot-eval output directory (eval_info.json, videos/, recordings/)",
                    "the evaluation's output directory", _cmd_import_eval)
+    _served_arguments(_import_parser(
+        fmt, "dreamzero-served", "DreamZero's served predictions (video_pred_output/NNNNNN_<prompt>_<time>.mp4)",
+        "the server's video_pred_output directory, or one of its videos", _cmd_import_served))
 
     p = sub.add_parser("info", help="describe a session, a LeRobot dataset or a GR00T-Dreams dump")
     p.add_argument("path")

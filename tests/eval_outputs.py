@@ -20,6 +20,9 @@ from inspector.data.video import encode_h264
 H, W = 96, 128
 
 
+PREDICTED_OFFSET = 3  # grey levels between a near-render prediction and the render [0..255]
+
+
 def render_level(step: int) -> int:
     return 10 + 7 * step
 
@@ -46,11 +49,16 @@ class Recorded:
 
 
 def write_eval(root: Path, episodes_per_task: dict[tuple[str, int], list[bool]], steps: int = 24,
-               record: bool = True, seed: int = 0, n_envs: int = 1) -> dict[str, list[Recorded]]:
+               record: bool = True, seed: int = 0, n_envs: int = 1,
+               predicted_near_render: bool = False) -> dict[str, list[Recorded]]:
     """Write an output directory; returns what each task's episodes hold (in episode order).
 
     With ``n_envs`` > 1 each task's recording is one dataset per env (``env_<k>``): episode i ran
-    in env i % n_envs, as lerobot-eval's batched envs do."""
+    in env i % n_envs, as lerobot-eval's batched envs do.
+
+    With ``predicted_near_render`` the predicted video's first view (its left half) is the render's
+    frame of the same step plus :data:`PREDICTED_OFFSET` grey levels: paired with the right render
+    frame its PSNR is 20 log10(255 / PREDICTED_OFFSET) dB; one step off, much lower."""
     rng = np.random.default_rng(seed)
     root.mkdir(parents=True)
     per_task, out = [], {}
@@ -80,7 +88,12 @@ def write_eval(root: Path, episodes_per_task: dict[tuple[str, int], list[bool]],
             encode_h264(video, [flat(render_level(s)) for s in range(steps)], fps=10, crf=18)
             video_paths.append(f"outputs/eval/2026-11-24/run/videos/{task}/eval_episode_{k}.mp4")
             pred = vdir / f"pred_episode_{k}.mp4"
-            encode_h264(pred, [flat(predicted_level(s), H, 2 * W) for s in range(steps)], fps=10, crf=18)
+            if predicted_near_render:
+                frames = [np.concatenate([flat(render_level(s) + PREDICTED_OFFSET), flat(predicted_level(s))], axis=1)
+                          for s in range(steps)]
+            else:
+                frames = [flat(predicted_level(s), H, 2 * W) for s in range(steps)]
+            encode_h264(pred, frames, fps=10, crf=18)
             pred_paths.append(str(pred))
         if record and n_envs == 1:
             write_lerobot_dataset(root / "recordings" / task, episodes, fps=10, units=None, joint_names=False)

@@ -31,12 +31,12 @@ TIMESTAMP_FPS = 16  # cosmos_predict2: i / 16
 INFO_FPS = 8  # what info.json says with --cosmos_predict2
 
 
-def modality() -> dict:
-    """IDM_dump/global_metadata/so100/modality.json."""
+def modality(video_keys: tuple[str, ...] = (VIDEO_KEY,)) -> dict:
+    """IDM_dump/global_metadata/so100/modality.json (one entry per camera)."""
     return {
         "state": {j: {"start": i, "end": i + 1} for i, j in enumerate(SO100_JOINTS)},
         "action": {j: {"start": i, "end": i + 1, "absolute": False} for i, j in enumerate(SO100_JOINTS)},
-        "video": {"webcam": {"original_key": VIDEO_KEY}},
+        "video": {k.removeprefix("observation.images."): {"original_key": k} for k in video_keys},
         "annotation": {"human.task_description": {"original_key": "task_index"}},
     }
 
@@ -56,20 +56,23 @@ def idm_actions(n: int, seed: int) -> np.ndarray:
     return np.array(SO100_ACTION_MEAN) + swing
 
 
-def frames(n: int, seed: int) -> np.ndarray:
-    """(n, 256, 256, 3): frame i is a block at a place and colour of its own, so frames differ."""
+def frames(n: int, seed: int, camera: int = 0) -> np.ndarray:
+    """(n, 256, 256, 3): frame i is a block at a place and colour of its own, so frames differ
+    (and each camera's blue differs: 60 + 80 c)."""
     out = np.zeros((n, 256, 256, 3), np.uint8)
     for i in range(n):
-        out[i, :, :] = (40 + 3 * i) % 256, (90 + 7 * seed) % 256, 60
+        out[i, :, :] = (40 + 3 * i) % 256, (90 + 7 * seed) % 256, 60 + 80 * camera
         x = (i * 9) % 200
         out[i, 100:160, x:x + 56] = 250, 250, 250
     return out
 
 
 def write_groot_dreams(root: Path, episodes: list[tuple[str, int]], *, actions: list[np.ndarray] | None = None,
-                       video: bool = True, video_frames: list[int] | None = None) -> Path:
+                       video: bool = True, video_frames: list[int] | None = None,
+                       video_keys: tuple[str, ...] = (VIDEO_KEY,)) -> Path:
     """A dump at ``root`` with one episode per (task, length); ``actions`` overrides each episode's
-    (T, 6) IDM labels; ``video_frames`` writes videos of other lengths than the episodes'."""
+    (T, 6) IDM labels; ``video_frames`` writes videos of other lengths than the episodes';
+    ``video_keys`` the cameras, one generated video each."""
     meta = root / "meta"
     meta.mkdir(parents=True)
     tasks: dict[str, int] = {}
@@ -82,27 +85,27 @@ def write_groot_dreams(root: Path, episodes: list[tuple[str, int]], *, actions: 
     with open(meta / "tasks.jsonl", "w") as f:
         for task, i in tasks.items():
             f.write(json.dumps({"task_index": i, "task": f"<DREAM>{task}"}) + "\n")
-    (meta / "modality.json").write_text(json.dumps(modality(), indent=4))
+    (meta / "modality.json").write_text(json.dumps(modality(video_keys), indent=4))
     (meta / "stats.json").write_text(json.dumps(stats(), indent=4))
     info = {
         "robot_type": "dream", "total_episodes": len(episodes), "total_frames": sum(n for _, n in episodes),
-        "total_tasks": len(tasks), "total_videos": 1, "chunks_size": 1000, "total_chunks": 1, "fps": INFO_FPS,
+        "total_tasks": len(tasks), "total_videos": len(video_keys), "chunks_size": 1000, "total_chunks": 1, "fps": INFO_FPS,
         "data_path": "data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet",
         "video_path": "videos/chunk-{episode_chunk:03d}/{video_key}/episode_{episode_index:06d}.mp4",
         "features": {
             "observation.state": {"dtype": "float32", "shape": [44], "names": [f"motor_{i}" for i in range(44)]},
             "action": {"dtype": "float32", "shape": [44], "names": [f"motor_{i}" for i in range(44)]},
             "annotation.human.task_description": {"dtype": "int64", "shape": [1]},
-            VIDEO_KEY: {"dtype": "video", "shape": [256, 256, 3], "names": ["height", "width", "channel"],
-                        "video_info": {"video.fps": 16.0, "video.codec": "h264", "video.pix_fmt": "yuv420p",
-                                       "video.is_depth_map": False}},
+            **{key: {"dtype": "video", "shape": [256, 256, 3], "names": ["height", "width", "channel"],
+                     "video_info": {"video.fps": 16.0, "video.codec": "h264", "video.pix_fmt": "yuv420p",
+                                    "video.is_depth_map": False}} for key in video_keys},
         },
     }
     (meta / "info.json").write_text(json.dumps(info, indent=4))
     data_dir = root / "data" / "chunk-000"
     data_dir.mkdir(parents=True)
-    video_dir = root / "videos" / "chunk-000" / VIDEO_KEY
-    video_dir.mkdir(parents=True)
+    for key in video_keys:
+        (root / "videos" / "chunk-000" / key).mkdir(parents=True)
     for e, (task, n) in enumerate(episodes):
         act = actions[e] if actions is not None else idm_actions(n, e)
         table = pa.table({
@@ -118,5 +121,7 @@ def write_groot_dreams(root: Path, episodes: list[tuple[str, int]], *, actions: 
         total += n
         if video:
             count = video_frames[e] if video_frames is not None else n
-            encode_h264(video_dir / f"episode_{e:06d}.mp4", frames(count, e), TIMESTAMP_FPS)
+            for c, key in enumerate(video_keys):
+                encode_h264(root / "videos" / "chunk-000" / key / f"episode_{e:06d}.mp4", frames(count, e, c),
+                            TIMESTAMP_FPS)
     return root

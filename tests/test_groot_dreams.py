@@ -296,6 +296,32 @@ def test_a_missing_video_leaves_the_arm_and_says_so(tmp_path):
     assert any("generated video" in w and "not found" in w for w in rollout.extra["warnings"])
 
 
+def test_every_camera_of_a_dump_is_a_view(tmp_path):
+    """Two cameras: both views in the app's rollout, in an imported session (each its own file,
+    told apart by its colour), in info; one camera's missing file drops that view alone."""
+    from inspector.data.importers.groot_dreams import NeuralTrajectories
+    from inspector.data.session import open_session
+    from inspector.data.video import VideoClip
+
+    keys = ("observation.images.front", "observation.images.wrist")
+    root = write_groot_dreams(tmp_path / "d", EPISODES[:2], video_keys=keys)
+    rollout, _ = NeuralTrajectories(root).rollout(1)
+    assert rollout.views == ["front", "wrist"]
+    out = _cli("import", "groot-dreams", str(root), "-o", str(tmp_path / "s"))
+    assert out.returncode == 0, out.stderr
+    r = open_session(tmp_path / "s").rollouts["episode_000001"]
+    assert r.views == ["front", "wrist"]
+    for c, view in enumerate(r.views):  # frames(..., camera=c): blue 60 + 80 c
+        _, rgb = next(iter(VideoClip(r.video_path(view)).iter_frames()))
+        assert abs(float(rgb[:20, :20, 2].mean()) - (60 + 80 * c)) < 6, view
+    info = json.loads(_cli("info", "--json", str(root)).stdout)
+    assert sorted(info["views"]) == ["front", "wrist"]
+    (root / "videos" / "chunk-000" / keys[1] / "episode_000000.mp4").unlink()
+    rollout, _ = NeuralTrajectories(root).rollout(0)
+    assert rollout.views == ["front"]
+    assert any("wrist's generated video" in w and "that view is not shown" in w for w in rollout.extra["warnings"])
+
+
 # ----------------------------------------------------------------------------------------------
 # Scale: the index only
 

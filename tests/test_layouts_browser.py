@@ -1,6 +1,7 @@
 """Other tools' output layouts in a real browser: one app serves a DreamZero-SO101 offline-inference
-run and a lerobot-eval output directory, as given on the command line (imported in memory); a page
-opens one rollout of each and sees its video and the arm."""
+run and two lerobot-eval output directories (with recordings, and without: video only), as given on
+the command line (imported in memory); a page opens one rollout of each and sees its video and the
+arm, or, video only, the imagined view beside the simulator's render and no arm."""
 
 from __future__ import annotations
 
@@ -21,7 +22,9 @@ def app(tmp_path_factory):
     root = tmp_path_factory.mktemp("layouts")
     write_run(root / "runs" / "ar3", 3)
     write_eval(root / "eval", {("so101_sim", 0): [True, False]})
-    app = serve([root / "runs", root / "eval"], port=0, block=False)
+    # lerobot-eval's default: no recordings, so video-only episodes
+    write_eval(root / "eval_videos", {("pusht", 0): [True]}, record=False, predicted_near_render=True)
+    app = serve([root / "runs", root / "eval", root / "eval_videos"], port=0, block=False)
     yield app
     app.stop()
 
@@ -41,4 +44,14 @@ def test_a_rollout_of_each_layout_shows_its_video_and_the_arm(browser, app):
         assert page.get_by_text(words).first.is_visible()
         if tag == "so101_sim_0_ep001":  # its outcome, on the card
             assert page.get_by_text("failure · reward 0 · task so101_sim_0").first.is_visible()
+    # a video-only episode: the imagined first view beside the simulator's render, and no arm
+    open_in_page(page, tab, app, "pusht_0_ep000")
+    assert set(frame_sources(page)) == {"render/imagined", "render/gt", "camera_1/imagined"}
+    boxes = {k: page.locator(f"img.inspector-frame[data-view='{k.split('/')[0]}'][data-kind='{k.split('/')[1]}']")
+             .bounding_box() for k in ("render/imagined", "render/gt")}
+    imagined, gt = boxes["render/imagined"], boxes["render/gt"]
+    assert imagined and gt and abs(imagined["y"] - gt["y"]) < 2 and gt["x"] >= imagined["x"] + imagined["width"] - 1
+    assert page.get_by_text("none: video only").first.is_visible()
+    assert page.get_by_text("success · reward 3 · task pusht_0").first.is_visible()
+    assert tab.scene.data is None and not tab.scene.pred_arm.visible and not tab.scene.gt_arm.visible
     page.close()

@@ -206,7 +206,7 @@ BAD = {
     "no-recording-of-an-episode": (lambda r: _edit_info(
         r, lambda i: [i["per_task"][0]["metrics"][k].append(v) for k, v in
                       (("successes", True), ("sum_rewards", 1.0), ("max_rewards", 1.0))]),
-        "recordings/so101_sim_0", "episode 2: no recording"),
+        "videos/so101_sim_0", "episode 2: neither a recording nor a video"),
 }
 
 

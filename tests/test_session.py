@@ -195,7 +195,7 @@ def test_cli_info_json_session_and_dataset(dz_layout_session, lerobot_dir):
     by_tag = {r["tag"]: r for r in info["rollouts"]}
     assert by_tag["ep000_train"] == {"tag": "ep000_train", "kind": "autoregressive", "n_chunks": 60, "horizon": 24,
                                      "executed_per_chunk": 9, "views": ["front", "gripper"],
-                                     "has_gt_joints": False}
+                                     "has_gt_joints": False, "video_only": False}
     assert by_tag["f076"]["has_gt_joints"] is True
     info = json.loads(_cli("info", str(lerobot_dir / "so101_v30"), "--json").stdout)
     assert info["format"] == "lerobot" and info["codebase_version"] == "v3.0" and info["fps"] == 30

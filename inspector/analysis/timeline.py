@@ -115,6 +115,11 @@ class RolloutTimeline:
         return self.gt_aligned is not None
 
     @property
+    def has_joints(self) -> bool:
+        """False for a video-only rollout: no predicted arm, no joint measure."""
+        return self.rollout.has_joints
+
+    @property
     def labels(self) -> ArmLabels:
         named = self.rollout.extra.get("arm_labels")  # an importer's own words (e.g. commanded / executed)
         if isinstance(named, dict) and all(isinstance(named.get(k), str) for k in ("pred", "gt", "drift")):
@@ -266,7 +271,7 @@ def build_timeline(rollout: Rollout, dataset_root: Path | None = None, gt: Groun
 
 def batch_key(rollout: Rollout, gt: GroundTruth) -> tuple | None:
     """Rollouts with the same key can share one :func:`build_timelines` batch (None: alone)."""
-    if gt.dataset_key is None or rollout.gt_actions is not None:
+    if gt.dataset_key is None or rollout.gt_actions is not None or not rollout.has_joints:
         return None
     return (gt.dataset_key, rollout.units, rollout.kind, rollout.actions.shape, rollout.steps_per_chunk)
 
@@ -277,7 +282,8 @@ def build_timelines(rollouts: Sequence[Rollout], gt: GroundTruth,
     one batch. Each rollout's numbers are the same as when it is computed alone."""
     first = rollouts[0]
     chunks = np.stack([r.actions for r in rollouts])
-    m = sweep_metrics(chunks, gt.actions, first.units, first.steps_per_chunk, gt.offset, limit_margin_deg,
+    # a video-only rollout has no predicted arm to hold against the GT arm: its joint measures stay None
+    m = sweep_metrics(chunks, gt.actions if first.has_joints else None, first.units, first.steps_per_chunk, gt.offset, limit_margin_deg,
                       alignments=first.kind != "episode")
     return [_timeline(r, gt, m, b, limit_margin_deg) for b, r in enumerate(rollouts)]
 

@@ -20,6 +20,7 @@ from ..data.session import CHAINED_KINDS
 from ..errors import InspectorError, one_line
 from ..units import JOINT_NAMES
 from ._frames import LOADING, READY, FramePair
+from ._video_only import is_video_only, joints_row
 
 CARD = "font-size:0.8rem;line-height:1.35;padding:0.1rem 0.2rem"
 GRID = ("display:grid;grid-template-columns:minmax(5.5rem,34%) minmax(0,1fr);column-gap:6px;row-gap:2px;"
@@ -171,7 +172,7 @@ def rollout_card(tl: RolloutTimeline, metrics: Sequence[tuple[str, str]], gt_not
         reward = outcome.get("sum_reward")
         rows.append(("outcome", esc(f"{'success' if outcome['success'] else 'failure'} · reward "
                                     f"{'—' if reward is None else format(reward, '.3g')} · task {outcome.get('task')}")))
-    rows.append(("3D scene", _scene_legend(tl)))
+    rows.append(joints_row(tl) if is_video_only(tl) else ("3D scene", _scene_legend(tl)))
     rows += [(esc(k), esc(v)) for k, v in metrics]
     return _card_table(r.tag, rows)
 

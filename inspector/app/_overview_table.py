@@ -21,6 +21,7 @@ from ..analysis.video_action import median_lag_label
 from ..report.compare import compare_reports
 from ..report.figures import report_figures
 from ..report.html import KIND_LABELS, figure_html
+from ..report.rows import limit_steps
 from ._overview_rows import OverviewRow
 
 SCOPE = "inspector-overview"  # the class of the overview's elements; its styles apply under it
@@ -50,7 +51,7 @@ METRICS: dict[str, Callable[[Summary], float | None]] = {
     "best-match final": _drift("best_match_drift", "final"),
     "tempo": lambda s: s["tempo"],
     "EE error": _drift("ee_error_mm", "mean"),
-    "limit steps": lambda s: s["limit_violations"]["steps"],
+    "limit steps": limit_steps,
     "reward": lambda s: (s.get("outcome") or {}).get("sum_reward"),
 }
 
@@ -138,7 +139,7 @@ def _matches(row: OverviewRow, q: Query, notes: Mapping[str, Note]) -> bool:
         return False
     if q.flagged_only and not notes.get(row.key, Note()).flag:
         return False
-    if q.violations_only and not (row.summary and row.summary["limit_violations"]["steps"] > 0):
+    if q.violations_only and not (row.summary and (limit_steps(row.summary) or 0) > 0):
         return False
     text = f"{row.prompt} {row.tag}".lower()
     return all(word in text for word in q.search.lower().split())

@@ -22,6 +22,7 @@ from ._keys import KEYS_HTML
 from ._label_ids import LABEL_IDS_HTML
 from ._light_3d import LIGHT_3D_HINT, LIGHT_3D_HTML, LIGHT_3D_LABEL
 from ._plots import CursorPlot, Line
+from ._video_only import is_video_only, panel_note
 
 SPEEDS = ("0.25x", "0.5x", "1x", "2x", "4x")
 NO_COMPARE = "— none —"
@@ -146,8 +147,15 @@ class PlotPanel:
         ticks = tl.t_s[tl.chunk_start_step[tl.chunk_start_step < tl.n_steps]]
         end = float(tl.episode_end_step / tl.fps) if tl.episode_end_step is not None else None
         common: dict[str, Any] = {"ticks": ticks, "end": end}
+        if is_video_only(tl):
+            with self.tab_drift:
+                self._handles.append(gui.add_html(panel_note()))
+            with self.tab_joints:
+                self._handles.append(gui.add_html(panel_note()))
         with self.tab_drift:
-            if tl.kind == "episode":
+            if is_video_only(tl):
+                pass
+            elif tl.kind == "episode":
                 # an episode's timeline always has GT joints (the measured arm)
                 assert tl.time_aligned_drift is not None and tl.joint_error is not None
                 self._add(CursorPlot(gui, f"Tracking error |commanded − measured| [{u.strip() or 'units'}], "
@@ -172,7 +180,7 @@ class PlotPanel:
                 self._add(CursorPlot(gui, "Joints past their URDF limit (count)", t, [
                     Line("joints over limit", tl.limit_violation.sum(axis=1).astype(float), LIMIT_HEX)],
                     floor=0.0, **common))
-            if compare is not None:
+            if compare is not None and not is_video_only(tl) and not is_video_only(compare):
                 per_step, per_chunk_div, collapse = prompt_divergence(tl.pred, compare.pred, tl.steps_per_chunk)
                 n = len(per_step)
                 div = np.full(tl.n_steps, np.nan)
@@ -185,8 +193,9 @@ class PlotPanel:
                     Line("chunk mean", div_chunk, CMP_HEX, 1.0, (4, 3)),
                 ], floor=0.0, **common))
         with self.tab_joints:
-            self.joint_plot = self._add(CursorPlot(gui, "", t, self._joint_lines(self.joint.value), **common))
-            self.joint_plot.set_lines(self._joint_lines(self.joint.value), title=self._joint_title())
+            if not is_video_only(tl):
+                self.joint_plot = self._add(CursorPlot(gui, "", t, self._joint_lines(self.joint.value), **common))
+                self.joint_plot.set_lines(self._joint_lines(self.joint.value), title=self._joint_title())
         with self.tab_ee:
             if tl.ee_error_mm is not None:
                 labels = tl.labels

@@ -47,6 +47,7 @@ from ._overview import OverviewPanel
 from ._panels import NO_COMPARE, ControlPanel, PlotPanel, VideoPanel
 from ._playback_clip import CLIP_STEPS, encode_clip
 from ._scene import TabScene
+from ._video_only import is_video_only
 
 PLAYBACK_FPS = 30.0
 LEFT_PANEL_PX, RIGHT_PANEL_PX = 350, 640
@@ -230,7 +231,9 @@ class TabState:
         c.chunk.visible = c.nav.visible = tl.n_chunks > 1
         cmp = self.compare
         self.video.set_views(loaded.frames.views)
-        self.scene.show(loaded.scene, cmp.scene if cmp is not None else None)
+        # a video-only rollout has no arm to draw (nor does a video-only compared one)
+        self.scene.show(None if is_video_only(tl) else loaded.scene,
+                        cmp.scene if cmp is not None and not is_video_only(cmp.timeline) else None)
         self.plots.build(tl, cmp.timeline if cmp is not None else None, loaded.frames.psnr, loaded.frames.match_errors)
         self._refresh_compare_info()
         if not keep_notes:
@@ -241,7 +244,7 @@ class TabState:
         if loaded is None:
             return
         tl = loaded.timeline
-        gt_note = "" if tl.has_gt_joints else "no GT joints: only the predicted arm is drawn"
+        gt_note = "" if tl.has_gt_joints or is_video_only(tl) else "no GT joints: only the predicted arm is drawn"
         metrics = headline_metrics(tl, loaded.frames.psnr, loading_video=not loaded.frames.done.is_set())
         if self.robot_note:
             metrics.insert(0, ("robot model", self.robot_note))

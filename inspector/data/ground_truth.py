@@ -114,7 +114,8 @@ def resolve_ground_truth(rollout: Rollout, dataset_root: Path | None = None) -> 
         assert root is not None  # an episode is read only from a dataset root
         dataset_key = (str(Path(root).resolve()), episode.index, rollout.start_frame)
     else:
-        actions, offset, source = None, 0, "none"
+        actions, offset = None, 0
+        source = "video carried with the rollout (no GT joints)" if rollout.gt_views else "none"
         if root is not None and not Path(root).exists():
             warning = f"dataset {root} not found"  # named but gone: say so, don't hide it
         if warning is not None:

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InspectorError
-from .importers import dreamzero_offline, lerobot_eval
+from .importers import dreamzero_offline, dreamzero_served, lerobot_eval
 from .importers.groot_dreams import LAYOUT as GROOT_DREAMS
 from .importers.groot_dreams import NeuralTrajectories, describe_layout, format_layout, is_groot_dreams
 from .lerobot_dataset import INFO_PATH, LeRobotDataset, is_lerobot_dataset
@@ -50,13 +50,15 @@ def describe(path: Path, calibration: str | None = None) -> dict[str, Any]:
         return dreamzero_offline.describe(path)
     if lerobot_eval.is_eval_output(path):
         return lerobot_eval.describe(path)
+    if dreamzero_served.is_served(path):
+        return dreamzero_served.describe(path)
     raise no_layout_fits(path)
 
 
 def _rollout_info(r: Any) -> dict[str, Any]:
     return {"tag": r.tag, "kind": r.kind, "n_chunks": r.n_chunks, "horizon": r.horizon,
             "executed_per_chunk": r.executed_per_chunk, "views": list(r.views),
-            "has_gt_joints": r.has_gt_joints or _dataset_has_episode(r)}
+            "has_gt_joints": r.has_gt_joints or _dataset_has_episode(r), "video_only": not r.has_joints}
 
 
 def _dataset_has_episode(r: Any) -> bool:
@@ -70,6 +72,8 @@ def format_info(info: dict[str, Any]) -> str:
         return format_layout(info)
     if info["format"] == dreamzero_offline.FORMAT:
         return dreamzero_offline.format_description(info)
+    if info["format"] == dreamzero_served.FORMAT:
+        return dreamzero_served.format_description(info)
     if info["format"] == lerobot_eval.FORMAT:
         return lerobot_eval.format_description(info)
     if info["format"] == "lerobot":
@@ -92,7 +96,7 @@ def format_info(info: dict[str, Any]) -> str:
         executed = r["executed_per_chunk"] if r["kind"] in CHAINED_KINDS else "-"
         lines.append(f"{r['tag']:<{width}} {r['kind']:<16} {r['n_chunks']:>6} {r['horizon']:>7} "
                      f"{executed:>4}  {'yes' if r['has_gt_joints'] else 'no':<9}  "
-                     f"{', '.join(r['views'])}")
+                     f"{', '.join(r['views'])}{'  (video only: no joints)' if r.get('video_only') else ''}")
     for tag, err in info.get("errors", {}).items():
         lines.append(f"{tag:<{width}} error: {err}")
     return "\n".join(lines)

@@ -8,7 +8,8 @@ Layout (every array in dataset units: arm degrees or -100..100 as ``session.json
       rollouts/<tag>/
         rollout.json          kind, episode_index, start_frame, prompt, fps, horizon,
                               executed_per_chunk, frames_per_chunk, views, gt {...}
-        actions.npy           (n_chunks, horizon, 6) predicted chunks
+        actions.npy           (n_chunks, horizon, 6) predicted chunks; absent for a video-only
+                              rollout (rollout.json then says ``n_chunks``)
         states.npy            optional (n_chunks + 1, 6) state before each chunk
         video/<view>.mp4      imagined frames, H.264
         gt/actions.npy        optional (T, 6) GT joints for steps start_frame .. start_frame+T-1
@@ -18,6 +19,10 @@ Layout (every array in dataset units: arm degrees or -100..100 as ``session.json
 Time: rollout step ``s`` is the s-th *executed* action (chunk ``s // executed_per_chunk``); it
 happens at ``s / fps`` seconds after ``start_frame``. Imagined frame ``f`` of a chunk shows step
 ``f * executed_per_chunk / frames_per_chunk`` of that chunk.
+
+A rollout without ``actions.npy`` is *video only* (a simulated evaluation run without recordings,
+a policy server's predicted video): its rollout.json gives ``n_chunks`` (with ``horizon`` the steps
+each chunk spans), it has imagined views and maybe GT views, and every joint metric of it is null.
 
 Writing never leaves a half-written session: a new session is built in a temporary sibling
 directory and renamed into place; a rollout added to an existing session is built in a temporary
@@ -77,6 +82,9 @@ ABSURD_VALUE = 1e100
 # them step times and video timestamps overflow or collapse (1e308 fps, 1e-300 fps) [frames/s].
 MIN_FPS = 0.001
 MAX_FPS = 1000.0
+# A video-only rollout's length comes from rollout.json alone (no array to bound it): a day at
+# 100 steps per second is more than any evaluation runs [steps].
+MAX_VIDEO_ONLY_STEPS = 10_000_000
 
 
 # The largest JSON document read whole (metadata: session.json, rollout.json, info.json, ...; none
@@ -151,6 +159,12 @@ class Rollout:
     @property
     def n_chunks(self) -> int:
         return int(self.actions_shape[0])
+
+    @property
+    def has_joints(self) -> bool:
+        """False for a video-only rollout (no ``actions.npy``): its :attr:`actions` are NaN, so
+        that the timeline keeps its shape while every joint measure of it stays undefined."""
+        return not isinstance(self._arrays.get("actions"), NoJoints)
 
     @property
     def has_gt_joints(self) -> bool:
@@ -456,7 +470,15 @@ def load_rollout(root: str | Path, units: Units | None = None, lazy: bool = Fals
         if value is not None:  # below the least is said above; this bounds them from above
             whole_number(value, meta_path, name, minimum=least)
 
-    arrays: dict[str, NpyFile | ArrayValue] = {"actions": NpyFile(root / ACTIONS_FILE, ("n_chunks", horizon, len(JOINT_NAMES)))}
+    arrays: dict[str, NpyFile | ArrayValue] = {}
+    if not (root / ACTIONS_FILE).exists() and "n_chunks" in meta:  # video only
+        n_video_chunks = whole_number(get("n_chunks", int), meta_path, "n_chunks", minimum=1)
+        require(n_video_chunks * horizon <= MAX_VIDEO_ONLY_STEPS, meta_path,
+                f"n_chunks: {n_video_chunks} chunks of {horizon} steps: more than the "
+                f"{MAX_VIDEO_ONLY_STEPS:,} steps any recorded rollout runs")
+        arrays["actions"] = NoJoints((n_video_chunks, horizon, len(JOINT_NAMES)))
+    else:
+        arrays["actions"] = NpyFile(root / ACTIONS_FILE, ("n_chunks", horizon, len(JOINT_NAMES)))
     n_chunks = arrays["actions"].shape[0]
     require(n_chunks >= 1, root / ACTIONS_FILE, "no chunks (shape[0] == 0)")
     if kind == "single_chunk":
@@ -498,6 +520,23 @@ class ArrayValue:
 
     def release(self) -> None:
         pass  # nothing to read again
+
+
+class NoJoints(ArrayValue):
+    """The actions of a video-only rollout: NaN of the shape its rollout.json gives, made when
+    first read (a long rollout's steps cost nothing until then)."""
+
+    def __init__(self, shape: tuple[int, ...]) -> None:
+        self.shape = tuple(shape)
+        self._nan: npt.NDArray[np.float64] | None = None
+
+    def load(self) -> npt.NDArray[np.float64]:
+        if self._nan is None:
+            self._nan = np.full(self.shape, np.nan)
+        return self._nan
+
+    def release(self) -> None:
+        self._nan = None
 
 
 class NpyFile:
@@ -837,7 +876,7 @@ class SessionWriter:
         tag: str,
         *,
         kind: RolloutKind,
-        actions: npt.ArrayLike,
+        actions: npt.ArrayLike | None,
         prompt: str = "",
         episode_index: int | None = None,
         start_frame: int = 0,
@@ -851,13 +890,17 @@ class SessionWriter:
         gt_episode_length: int | None = None,
         extra: Mapping[str, Any] | None = None,
         overwrite: bool = False,
+        n_chunks: int | None = None,
+        horizon: int | None = None,
     ) -> Path:
         """Write one rollout (validated by reading it back before it becomes visible).
 
         Args:
             tag: directory name, letters/digits/``_.-``.
             kind: ``"single_chunk"``, ``"autoregressive"`` or ``"open_loop_replay"``.
-            actions: (n_chunks, horizon, 6) predicted chunks in the session's units.
+            actions: (n_chunks, horizon, 6) predicted chunks in the session's units, or None for
+                a video-only rollout (then ``n_chunks`` and ``horizon`` give its length: chunks,
+                and steps each chunk spans).
             states: optional (n_chunks + 1, 6) state before each chunk.
             videos: ``{view: frames (N, H, W, 3) uint8 | path to a video}``; paths are copied if
                 already H.264, otherwise re-encoded.
@@ -875,10 +918,16 @@ class SessionWriter:
         if tag in self.tags or (dest.exists() and not overwrite):
             raise InspectorError((self._final or self.root) / ROLLOUTS_DIR / tag,
                                  f"rollout {tag!r} already exists in this session")
-        actions_arr = np.asarray(actions, dtype=np.float64)
+        if actions is None:
+            if n_chunks is None or horizon is None:
+                raise InspectorError(tag, "a video-only rollout (actions=None) needs n_chunks and horizon")
+            actions_arr = np.zeros((int(n_chunks), int(horizon), 0))
+        else:
+            actions_arr = np.asarray(actions, dtype=np.float64)
         staged = make_staging_dir(dest)
         try:
-            np.save(staged / ACTIONS_FILE, actions_arr)
+            if actions is not None:
+                np.save(staged / ACTIONS_FILE, actions_arr)
             if states is not None:
                 np.save(staged / STATES_FILE, np.asarray(states, dtype=np.float64))
             if gt_actions is not None:
@@ -901,6 +950,8 @@ class SessionWriter:
                 "gt": {"views": sorted(gt_videos or {}), "episode_length": gt_episode_length},
                 "units": self.units.to_json(),
             }
+            if actions is None:
+                meta["n_chunks"] = int(actions_arr.shape[0])
             if extra:
                 meta["extra"] = dict(extra)
             write_json_atomic(staged / ROLLOUT_FILE, meta)

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from ..cache import record_import_sources
 from ..errors import InspectorError
-from .importers import dreamzero_offline, lerobot_eval
+from .importers import dreamzero_offline, dreamzero_served, lerobot_eval
 from .importers.dreamzero_so101 import find_sources, load_in_memory
 from .importers.groot_dreams import LAYOUT_HINT as GROOT_DREAMS_HINT
 from .importers.groot_dreams import LAYOUT_TITLE as GROOT_DREAMS_TITLE
@@ -32,7 +32,8 @@ RAW_LAYOUTS = ("a session (session.json)", "a LeRobot dataset (meta/info.json)",
                f"{GROOT_DREAMS_TITLE} ({GROOT_DREAMS_HINT})",
                "DreamZero-SO101 evaluation (meta.json + action_trace.npy or actions_pred)",
                f"{dreamzero_offline.LAYOUT_NAME} ({dreamzero_offline.ACTIONS_CSV})",
-               f"{lerobot_eval.LAYOUT_NAME} ({lerobot_eval.EVAL_INFO})")
+               f"{lerobot_eval.LAYOUT_NAME} ({lerobot_eval.EVAL_INFO})",
+               f"{dreamzero_served.LAYOUT_NAME} ({dreamzero_served.LAYOUT_HINT})")
 BUNDLED_DEMO = Path(__file__).resolve().parents[2] / "sessions" / "demo"
 
 
@@ -157,6 +158,8 @@ def _import_raw(path: Path, dataset: str | Path | None
         return dreamzero_offline.load_in_memory(path, dataset=dataset)
     if lerobot_eval.is_eval_output(path):
         return lerobot_eval.load_in_memory(path)
+    if dreamzero_served.is_served(path):
+        return dreamzero_served.load_in_memory(path, dataset=dataset)
     try:
         find_sources(path)  # raises a clear error when there is nothing to import
     except InspectorError:

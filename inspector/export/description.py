@@ -51,6 +51,7 @@ def describe(tl: RolloutTimeline, psnr_db: Mapping[str, float | None],
         *[f"| mean video PSNR, {v} | {_fmt(p, ' dB')} |" for v, p in psnr_db.items()],
         *[_agreement_row(va) for va in (agreements or {}).values()],
         *_reference_rows(r.extra),
+        *_outcome_rows(r.extra),
         *_fact_rows(r.extra),
         "",
         "## How to read this recording",
@@ -69,7 +70,11 @@ def describe(tl: RolloutTimeline, psnr_db: Mapping[str, float | None],
         "episode's end (later steps compare with the final GT pose); red crosses in the joint "
         "plots mark limit violations. The `events` log lists the same moments.",
     ]
-    if not tl.has_gt_joints:
+    if not tl.has_joints:
+        lines.append("- **Video only:** this rollout has no joints (no predicted or executed arm): "
+                     "there is no 3D view and no joint plot; the videos, their PSNR and the outcome are "
+                     "what it holds.")
+    elif not tl.has_gt_joints:
         lines.append("- No GT joints were available: drift plots and the GT arm are absent; "
                      "the prediction, its limits and the videos still are.")
     return "\n".join(lines) + "\n"
@@ -124,6 +129,8 @@ def describe_episode(tl: RolloutTimeline) -> str:
 
 
 def _joint_rows(tl: RolloutTimeline, unit: str) -> list[str]:
+    if not tl.has_joints:
+        return ["| joints | none: video only |"]
     if not tl.has_gt_joints:
         return ["| GT joints | not available |"]
     inside = ~tl.post_episode if tl.post_episode is not None else np.ones(tl.n_steps, bool)
@@ -158,10 +165,22 @@ def _agreement_row(va: VideoAction) -> str:
 
 
 def _limit_rows(tl: RolloutTimeline) -> list[str]:
+    if not tl.has_joints:
+        return []
     per_joint = tl.limit_violation.sum(axis=0)
     steps = int(tl.limit_violation.any(axis=1).sum())
     detail = ", ".join(f"{j} {int(n)}" for j, n in zip(JOINT_NAMES, per_joint) if n) or "none"
     return [f"| steps with a joint past its limit | {steps} of {tl.n_steps} ({detail}) |"]
+
+
+def _outcome_rows(extra: Mapping[str, object]) -> list[str]:
+    """A simulated evaluation's verdict (lerobot-eval: success, reward, task)."""
+    outcome = extra.get("outcome")
+    if not isinstance(outcome, dict) or outcome.get("success") is None:
+        return []
+    reward = outcome.get("sum_reward")
+    return [f"| outcome | {'success' if outcome['success'] else 'failure'}, reward "
+            f"{'-' if reward is None else format(reward, '.3g')}, task {outcome.get('task')} |"]
 
 
 def _fact_rows(extra: Mapping[str, object]) -> list[str]:

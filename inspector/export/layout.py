@@ -153,6 +153,7 @@ class Contents:
         pred_name, gt_name: the arms' names in titles.
         chunks: the rollout has several chunks.
         eye: the 3D view's camera (position, look target) [m].
+        joints: the rollout has joints; a video-only one has no 3D view and no joint plots.
     """
 
     views: dict[str, tuple[bool, bool]] = field(default_factory=dict)
@@ -164,6 +165,7 @@ class Contents:
     chunks: bool = True  # more than one chunk (else no chunk RMSE plot)
     # the 3D view's eye: (position, look target) [m], fitted to everything drawn
     eye: tuple[tuple[float, float, float], tuple[float, float, float]] = ((0.55, -0.45, 0.4), (0.15, 0.0, 0.1))
+    joints: bool = True
 
 
 def build_blueprint(contents: Contents) -> rrb.Blueprint:
@@ -179,10 +181,10 @@ def build_blueprint(contents: Contents) -> rrb.Blueprint:
         plots.append(rrb.TimeSeriesView(name="End-effector error [mm]", origin=f"/{EE_ERROR}",
                                         contents=["$origin", markers]))
     # two columns: three narrow plots a row cut the joint names short ("should...")
-    plots.append(rrb.Grid(*[rrb.TimeSeriesView(name=j, origin=f"/{PLOTS}/joints/{j}",
+    plots += [] if not contents.joints else [rrb.Grid(*[rrb.TimeSeriesView(name=j, origin=f"/{PLOTS}/joints/{j}",
                                                contents=["$origin/**", markers],
                                                plot_legend=rrb.PlotLegend(visible=False))
-                            for j in JOINT_NAMES], grid_columns=2, name="Joints"))
+                            for j in JOINT_NAMES], grid_columns=2, name="Joints")]
     if contents.psnr_views:
         plots.append(rrb.TimeSeriesView(name="Video PSNR [dB]", origin=f"/{PLOTS}/psnr",
                                         contents=["$origin/**", markers]))
@@ -212,8 +214,10 @@ def build_blueprint(contents: Contents) -> rrb.Blueprint:
         for view, has in contents.views.items()
     ]
     right: list[rrb.View | rrb.Container] = [*pairs, rrb.TextDocumentView(name="About", origin=f"/{DESCRIPTION}")]
+    left = (rrb.Vertical(scene, rrb.Tabs(*plots, name="Plots"), row_shares=[3, 2]) if contents.joints
+            else rrb.Vertical(rrb.Tabs(*plots, name="Plots")))  # video only: no arm to show in 3D
     layout = rrb.Horizontal(
-        rrb.Vertical(scene, rrb.Tabs(*plots, name="Plots"), row_shares=[3, 2]),
+        left,
         rrb.Vertical(*right, row_shares=[*([2] * len(pairs)), 2]),
         column_shares=[3, 2],
     )

@@ -82,7 +82,8 @@ def write_recording(timeline: RolloutTimeline, path: str | Path, views: Sequence
         psnr_views=[v for v, series in psnr.items() if np.isfinite(series).any()],
         agreement_views=[v for v in psnr if timeline.video_action(v) is not None],
         pred_name=timeline.labels.pred, gt_name=timeline.labels.gt, chunks=timeline.n_chunks > 1,
-        eye=eye_fitting(timeline),
+        eye=eye_fitting(timeline) if timeline.has_joints else L.Contents.eye,
+        joints=timeline.has_joints,
     )
     # Encoded in memory (a few MB) and written by us: a write error (disk full, permission) is
     # then an ordinary OSError naming the file, not a log line from rerun's writer thread.
@@ -161,9 +162,10 @@ def _log_recording(rec: rr.RecordingStream, tl: RolloutTimeline, views: list[str
     agreements = {v: va for v in psnr if (va := tl.video_action(v)) is not None}
     rec.log(L.DESCRIPTION, rr.TextDocument(describe(tl, mean_psnr, agreements), media_type="text/markdown"),
             static=True)
-    log_arms(rec, tl, steps_indexes(np.arange(tl.n_steps)))
-    report(0.80, "metric series")
-    log_metric_series(rec, tl, steps_indexes)
+    if tl.has_joints:  # a video-only rollout has no arm, no joint series
+        log_arms(rec, tl, steps_indexes(np.arange(tl.n_steps)))
+        report(0.80, "metric series")
+        log_metric_series(rec, tl, steps_indexes)
     log_markers(rec, tl, steps_indexes)
     for i, (view, series) in enumerate(psnr.items()):
         log_psnr(rec, tl, view, series, frames_indexes, L.VIEW_RGBA[i % len(L.VIEW_RGBA)])

@@ -24,7 +24,7 @@ from ..errors import InspectorError
 from ..jobs.pool import default_jobs, worker_count
 from ..jobs.ray import ray_workers
 from ..units import DEFAULT_LIMIT_MARGIN_DEG, JOINT_NAMES
-from .rows import aggregate, prompt_divergence_record, prompt_pairs
+from .rows import aggregate, limit_margin, limit_steps, prompt_divergence_record, prompt_pairs
 from .tasks import EpisodeTask, Task, plan_episode_tasks, plan_tasks, run_tasks, run_tasks_on_ray
 from .trajectories import TRAJECTORY_LAYOUT, trajectory_table
 
@@ -145,7 +145,7 @@ def _prompt_divergences(sources, keys: list[tuple[str, str]], rows: dict) -> lis
     """Training vs novel prompt (and any other prompt pairs) from the same start."""
     sessions = {str(s.root): s for s in sources.sessions}
     entries = [(key, (key[0], rows[key]["episode_index"], rows[key]["start_frame"]), key[1], rows[key]["prompt"])
-               for key in keys if rows[key]["kind"] == "autoregressive"]
+               for key in keys if rows[key]["kind"] == "autoregressive" and not rows[key].get("video_only")]
     out = []
     for (root_a, tag_a), (root_b, tag_b) in prompt_pairs(entries):
         a, b = sessions[root_a].rollouts[tag_a], sessions[root_b].rollouts[tag_b]
@@ -201,9 +201,9 @@ def format_report(report: dict[str, Any]) -> str:
             mse = r["per_step_mse"]
             lines.append(f"{r['tag']:<{width}} {_f(r['rmse_deg'], '.3f'):>9} {worst:>20} "
                          f"{_f(mse[0] if mse else None):>10} {_f(mse[-1] if mse else None):>9} "
-                         f"{r['limit_violations']['steps']:>9}{psnr_cells(r)}  {r['prompt']}")
+                         f"{_f(limit_steps(r), 'd'):>9}{psnr_cells(r)}  {r['prompt']}")
         lines.append("")
-    lines += _evaluated_table(evaluated, report["aggregate"].get("success_by_task", []))
+    lines += _evaluated_table(evaluated, report["aggregate"].get("success_by_task", []), views)
     for kind, auto in chained.items():
         if not auto:
             continue
@@ -216,7 +216,7 @@ def format_report(report: dict[str, Any]) -> str:
                 f"{r['tag']:<{width}} {r['n_chunks']:>6} {_f(ta and ta['mean']):>9} {_f(ta and ta['final']):>8} "
                 f"{_f(bm and bm['mean']):>8} {_f(dtw and dtw['mean']):>7} {_f(r['tempo']):>6} "
                 f"{_f(r['ee_error_mm'] and r['ee_error_mm']['mean'], '.1f'):>7} "
-                f"{_f(r['post_episode_chunks'], 'd'):>5} {r['limit_violations']['steps']:>9}{psnr_cells(r)}"
+                f"{_f(r['post_episode_chunks'], 'd'):>5} {_f(limit_steps(r), 'd'):>9}{psnr_cells(r)}"
                 f"  {r['prompt']}")
         if any(r["time_aligned_drift"] is None for r in auto):
             lines.append("  ('-': no GT joints; import with --dataset ROOT to measure drift)")
@@ -227,8 +227,9 @@ def format_report(report: dict[str, Any]) -> str:
         lines.append(f"error: {err}")
     if not rows:
         return "\n".join(lines)
-    margin = rows[0]["limit_violations"]["margin_deg"]
-    lines.append(f"lim.steps: steps with any joint more than {margin:g} deg past its URDF limit; "
+    margin = limit_margin(rows)
+    lines.append(f"lim.steps: steps with any joint more than {_f(margin, 'g')} deg past its URDF limit "
+                 f"('-': video only, no joints); "
                  f"PSNR [dB]: imagined vs GT frames of that camera; lag s: median of the video's GT time "
                  f"minus the joints' (+: the video runs ahead of the actions; frozen: the video stands still "
                  f"while the joints move, no lag; no match: no frame has a GT time on both sides)")
@@ -263,20 +264,22 @@ def _episode_table(episodes: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
-def _evaluated_table(rows: list[dict[str, Any]], by_task: list[dict[str, Any]]) -> list[str]:
+def _evaluated_table(rows: list[dict[str, Any]], by_task: list[dict[str, Any]], views: list[str]) -> list[str]:
     """Episodes of a simulated evaluation: success, reward, how closely the arm followed its
-    commands; then the success rate per task."""
+    commands (``-`` for a video-only episode), PSNR per view; then the success rate per task."""
     if not rows:
         return []
     width = max([18] + [len(r["tag"]) for r in rows])
+    psnr_head = "".join(f" {('PSNR ' + v)[:11]:>11}" for v in views)
     lines = ["Evaluated episodes (tracking = commanded action vs executed state)",
              f"{'episode':<{width}} {'success':>7} {'reward':>8} {'max rew.':>8} {'steps':>6} {'RMSE deg':>9} "
-             f"{'lim.steps':>9}  task"]
+             f"{'lim.steps':>9}{psnr_head}  task"]
     for r in rows:
         o = r["outcome"]
+        psnr = "".join(f" {_f(r['video_psnr_db'].get(v), '.1f'):>11}" for v in views)
         lines.append(f"{r['tag']:<{width}} {'yes' if o.get('success') else 'no':>7} {_f(o.get('sum_reward'), '.3g'):>8} "
                      f"{_f(o.get('max_reward'), '.3g'):>8} {r['steps_per_chunk']:>6} {_f(r['rmse_deg'], '.3f'):>9} "
-                     f"{r['limit_violations']['steps']:>9}  {o.get('task')}")
+                     f"{_f(limit_steps(r), 'd'):>9}{psnr}  {o.get('task')}")
     lines += ["", "Success rate per task"]
     lines += [f"  {t['task']}: {t['successes']}/{t['episodes']} ({100 * t['success_rate']:.0f}%), mean reward "
               f"{_f(t['mean_sum_reward'], '.3g')}" for t in by_task]

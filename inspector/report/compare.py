@@ -6,7 +6,9 @@ pair by tag; those left pair by (episode, start frame, prompt, kind), tags shari
 prefix first. Per pair:
 both rows and the differences ``b - a`` (positive: B is worse). Over the pairs: how often each
 side is better (lower wins), the mean difference, the rank agreement (Spearman) and a Wilcoxon
-signed-rank test, for the chunk RMSE and, where GT joints exist, the time-aligned drift.
+signed-rank test, for the chunk RMSE and, where GT joints exist, the time-aligned drift; per view,
+the same for the mean PSNR (higher is better), and the pairs' success on each side: how rollouts
+without joints (video only) compare.
 """
 
 from __future__ import annotations
@@ -154,6 +156,8 @@ def compare_reports(report_a: dict[str, Any], report_b: dict[str, Any]) -> dict[
     with_drift = [(_time_aligned(p["a"]), _time_aligned(p["b"])) for p in pairs
                   if p["delta_time_aligned_drift_deg"] is not None]
     drift = paired_summary(*zip(*with_drift)) if with_drift else paired_summary([], [])
+    for p in pairs:
+        p["delta_video_psnr_db"] = _psnr_deltas(p["a"], p["b"])
     out: dict[str, Any] = {
         "pairs": pairs,
         "unmatched_a": [r["tag"] for r in unmatched_a],
@@ -167,10 +171,49 @@ def compare_reports(report_a: dict[str, Any], report_b: dict[str, Any]) -> dict[
                                "mean_delta_deg": drift["mean_delta"], "spearman": drift["spearman"],
                                "wilcoxon_p": drift["wilcoxon_p"]},
     }
+    out["video_psnr_db"] = _psnr_summary(pairs)
+    out["success"] = _success_summary(pairs)
     errors = {side: rep["errors"] for side, rep in (("a", report_a), ("b", report_b)) if rep.get("errors")}
     if errors:
         out["errors"] = errors
     return out
+
+
+def _psnr_deltas(a: Row, b: Row) -> dict[str, float]:
+    """B - A mean PSNR [dB] of each view both rows have (positive: B's video is closer to GT)."""
+    pa, pb = a.get("video_psnr_db") or {}, b.get("video_psnr_db") or {}
+    return {v: pb[v] - pa[v] for v in sorted(pa) if v in pb}
+
+
+def _psnr_summary(pairs: Sequence[Row]) -> dict[str, dict[str, Any]]:
+    """Per view, over the pairs with its PSNR on both sides, who wins (higher PSNR is better:
+    ``a_better`` counts pairs where A's is higher), the mean B - A [dB], Spearman, Wilcoxon p.
+    This is how video-only rollouts (no RMSE, no drift) compare."""
+    views = sorted({v for p in pairs for v in p["delta_video_psnr_db"]})
+    out = {}
+    for view in views:
+        both = [(p["a"]["video_psnr_db"][view], p["b"]["video_psnr_db"][view]) for p in pairs
+                if view in p["delta_video_psnr_db"]]
+        a, b = zip(*both)
+        s = paired_summary([-x for x in a], [-x for x in b])  # lower -PSNR is better
+        out[view] = {"n_compared": s["n_pairs"], "a_better": s["a_better"], "b_better": s["b_better"],
+                     "ties": s["ties"], "mean_delta_db": -s["mean_delta"] if s["mean_delta"] is not None else None,
+                     "spearman": s["spearman"], "wilcoxon_p": s["wilcoxon_p"]}
+    return out
+
+
+def _success_summary(pairs: Sequence[Row]) -> dict[str, int]:
+    """Pairs whose rows both carry a simulated evaluation's success: how many succeeded on both
+    sides, only on A's, only on B's, on neither."""
+    def success(r: Row) -> bool | None:
+        o = r.get("outcome")
+        return o.get("success") if isinstance(o, dict) else None
+
+    both = [(bool(x), bool(y)) for x, y in ((success(p["a"]), success(p["b"])) for p in pairs)
+            if x is not None and y is not None]
+    return {"n_compared": len(both), "both": sum(x and y for x, y in both),
+            "only_a": sum(x and not y for x, y in both), "only_b": sum(y and not x for x, y in both),
+            "neither": sum(not x and not y for x, y in both)}
 
 
 def build_comparison(path_a: str, path_b: str, **report_args: Any) -> dict[str, Any]:
@@ -231,6 +274,14 @@ def format_comparison(c: dict[str, Any]) -> str:
                   "in-episode steps",
               _summary_line("RMSE", c["summary"], "mean_delta_rmse_deg", "spearman_rmse"),
               _summary_line("Time-aligned drift", c["time_aligned_drift"], "mean_delta_deg", "spearman")]
+    for view, v in c.get("video_psnr_db", {}).items():
+        lines.append(f"PSNR {view} over {v['n_compared']} pair(s) (higher is better): A better {v['a_better']}, "
+                     f"B better {v['b_better']}, ties {v['ties']}; mean delta (B - A) {v['mean_delta_db'] + 0.0:+.2f} dB; "
+                     f"Wilcoxon p {_f(v['wilcoxon_p'], '.3g')}")
+    succ = c.get("success") or {}
+    if succ.get("n_compared"):
+        lines.append(f"Success over {succ['n_compared']} pair(s): both {succ['both']}, only A {succ['only_a']}, "
+                     f"only B {succ['only_b']}, neither {succ['neither']}")
     for side in ("a", "b"):
         tags = c[f"unmatched_{side}"]
         if tags:

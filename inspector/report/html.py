@@ -33,6 +33,7 @@ from ..errors import InspectorError
 from ..units import JOINT_NAMES
 from .episode_figures import episode_figures, episode_key, episode_summary_numbers
 from .figures import Figure, report_figures
+from .rows import limit_margin, limit_steps
 from .svg import legend_html
 
 Row = dict[str, Any]
@@ -102,7 +103,7 @@ def _columns(rows: Sequence[Row], views: list[str]) -> list[tuple[str, str, bool
          lambda r: _f(r["ee_error_mm"] and r["ee_error_mm"]["mean"], ".1f")),
         ("post", "chunks starting after the episode's end", True, lambda r: _f(r["post_episode_chunks"], "d")),
         ("lim.steps", "steps with any joint past its URDF limit (beyond the margin)", True,
-         lambda r: str(r["limit_violations"]["steps"])),
+         lambda r: _f(limit_steps(r), "d")),
     ]
     for view in views:
         cols.append((f"PSNR {view}", f"imagined vs GT frames, {view} camera [dB]", True,
@@ -145,7 +146,7 @@ def _table(rows: Sequence[Row], links: dict[int, str]) -> str:
 def _summary(report: dict[str, Any]) -> str:
     rows, agg = report["rollouts"], report["aggregate"]
     n_single = sum(r["kind"] == "single_chunk" for r in rows)
-    with_limits = sum(r["limit_violations"]["steps"] > 0 for r in rows)
+    with_limits = sum((limit_steps(r) or 0) > 0 for r in rows)
     n_replay = sum(r["kind"] == "open_loop_replay" for r in rows)
     kinds = f"{n_single} single-chunk, {len(rows) - n_single - n_replay} autoregressive" + (
         f", {n_replay} open-loop replay" if n_replay else "")
@@ -154,8 +155,8 @@ def _summary(report: dict[str, Any]) -> str:
              (_f(agg["median_rmse_deg"], ".3f"), "median RMSE [deg]"),
              (f'{_f(agg["best_rmse_deg"], ".3f")} / {_f(agg["worst_rmse_deg"], ".3f")}', "best / worst RMSE [deg]")]
     cards += [(f"{v:.2f}", f"mean PSNR {view} [dB]") for view, v in agg["mean_video_psnr_db"].items()]
-    if rows:  # a report of datasets alone has none
-        margin = rows[0]["limit_violations"]["margin_deg"]
+    margin = limit_margin(rows)
+    if margin is not None:  # a report of datasets alone, or of video-only rollouts, has none
         cards.append((str(with_limits), f"rollouts past a joint limit (&gt; {margin:g} deg)"))
     out = ['<div class="cards">']
     out += [f'<div class="card"><div class="v">{escape(v)}</div><div class="k">{k}</div></div>' for v, k in cards]

@@ -13,6 +13,7 @@ from collections.abc import Iterable, Mapping
 from typing import Annotated, Any, TypedDict, cast
 
 import numpy as np
+import numpy.typing as npt
 
 from ..analysis import metrics
 from ..analysis.timeline import RolloutTimeline
@@ -83,9 +84,11 @@ class RolloutRow(TypedDict):
     dtw_drift: DriftSummary | None
     tempo: float | None
     ee_error_mm: EndEffectorError | None
-    limit_violations: LimitRecord
-    worst_chunk: WorstChunk
+    video_only: bool  # no predicted joints: every joint field is null, never 0
+    limit_violations: LimitRecord | None
+    worst_chunk: WorstChunk | None
     video_psnr_db: dict[str, float]
+    video_per_chunk: dict[str, VideoPerChunk]  # per view; imagined frame f in chunk f // frames_per_chunk
     video_action: dict[str, ViewAgreementJson] | None  # per view; null with video_action_note saying why
     video_action_note: str | None
     post_episode_chunks: int | None
@@ -93,6 +96,36 @@ class RolloutRow(TypedDict):
     gt_warning: str | None
     chunk_joints: ChunkJoints | None
     outcome: dict[str, Any] | None  # a simulated evaluation's verdict (lerobot-eval): success, rewards, task
+
+
+class VideoPerChunk(TypedDict):
+    psnr_db: list[float | None]  # per chunk: mean over its imagined frames with a GT frame; null: none
+    ssim: list[float | None] | None  # likewise; null where SSIM was not computed
+
+
+def video_per_chunk(tl: RolloutTimeline, vm: VideoMetrics) -> VideoPerChunk:
+    """A view's PSNR (and SSIM) per chunk: the mean over each chunk's imagined frames (frame f
+    belongs to chunk f // frames_per_chunk; a leading frame past the last chunk to the last)."""
+    chunk = np.minimum(np.arange(vm.psnr_db.size) // max(1, tl.rollout.frames_per_chunk), tl.n_chunks - 1)
+
+    def means(values: npt.NDArray[np.float64]) -> list[float | None]:
+        out: list[float | None] = []
+        for c in range(tl.n_chunks):
+            v = values[(chunk == c) & np.isfinite(values)]
+            out.append(round(float(v.mean()), 6) if v.size else None)
+        return out
+    return {"psnr_db": means(vm.psnr_db), "ssim": means(vm.ssim) if vm.ssim is not None else None}
+
+
+def limit_steps(row: Mapping[str, Any]) -> int | None:
+    """Steps with a joint past its limit, or None for a video-only row (no joints to be past one)."""
+    lim = row.get("limit_violations")
+    return None if lim is None else int(lim["steps"])
+
+
+def limit_margin(rows: Iterable[Mapping[str, Any]]) -> float | None:
+    """The joint-limit margin [deg] of the first row with joints (None when none has)."""
+    return next((r["limit_violations"]["margin_deg"] for r in rows if r.get("limit_violations")), None)
 
 
 def _in_episode(tl: RolloutTimeline, series: np.ndarray) -> np.ndarray:
@@ -141,6 +174,7 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> d
     psnr = {view: vm.mean_psnr_db for view, vm in sorted(video.items()) if vm.mean_psnr_db is not None}
     agreement, agreement_note = video_action_record(tl, video)
     worst, worst_by = tl.worst_chunk()
+    joints = tl.has_joints
     episode_length = None
     if tl.gt.episode_length is not None:  # counted from the rollout's step 0: back to the episode's start
         episode_length = int(tl.gt.episode_length - tl.gt.offset + r.start_frame)
@@ -163,15 +197,18 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> d
         "dtw_drift": _drift_summary(tl, tl.dtw_drift),
         "tempo": tl.tempo,
         "ee_error_mm": ee,
-        "limit_violations": limit_record(tl.limit_summary(), tl.limit_margin_deg),
-        "worst_chunk": {"chunk": worst, "by": worst_by},
+        "video_only": not joints,
+        "limit_violations": limit_record(tl.limit_summary(), tl.limit_margin_deg) if joints else None,
+        "worst_chunk": {"chunk": worst, "by": worst_by} if joints else None,
         "video_psnr_db": psnr,
+        "video_per_chunk": {view: video_per_chunk(tl, vm) for view, vm in sorted(video.items())
+                            if vm.mean_psnr_db is not None},
         "video_action": agreement,
         "video_action_note": agreement_note,
         "post_episode_chunks": post_chunks,
         "gt_source": tl.gt.source,
         "gt_warning": tl.gt.warning,
-        "chunk_joints": _chunk_joints(tl),
+        "chunk_joints": _chunk_joints(tl) if joints else None,
         # a simulated evaluation's verdict (success, rewards, task), as its importer kept it
         "outcome": r.extra.get("outcome"),
     }

@@ -282,8 +282,9 @@ def _compute_together(batch: list[_Pending], task: Task, cache) -> list[Outcome]
         need = [tl for tl in timelines if view in tl.video_views() and view not in tl.known_video_metrics()]
         if need:
             gt_clip = need[0].gt.clips[view]
+            # SSIM (~10x PSNR's cost) where the video is all a rollout has to be judged by
             results = compare_clips(view, [tl.rollout.video(view) for tl in need], gt_clip,
-                                    need[0].gt_index_of_frame(view))
+                                    need[0].gt_index_of_frame(view), with_ssim=not need[0].has_joints)
             for tl, vm in zip(need, results):
                 tl.set_video_metrics(vm)
     outcomes = []

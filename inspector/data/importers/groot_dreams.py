@@ -120,7 +120,8 @@ class Trajectory:
         actions: (T, 6) ``raw`` through the calibration: URDF zeros, degrees, gripper 0..100.
         timestamps: (T,) [s] from the file (``i / fps`` when it has none).
         fps: steps per second, from the timestamps.
-        video: the generated video, or None when it is missing.
+        videos: camera -> the generated video of that camera (every camera the dump lists whose
+            file is there).
         warnings: what the user should know (frame rate, frame count, calibration).
     """
 
@@ -131,8 +132,13 @@ class Trajectory:
     actions: npt.NDArray[np.float64]
     timestamps: npt.NDArray[np.float64]
     fps: float
-    video: Path | None
+    videos: dict[str, Path]
     warnings: list[str] = field(default_factory=list)
+
+    @property
+    def video(self) -> Path | None:
+        """The first camera's video, or None without any."""
+        return next(iter(self.videos.values()), None)
 
     @property
     def length(self) -> int:
@@ -403,15 +409,19 @@ class NeuralTrajectories:
             warnings.append("every action is 0: the IDM labels were never written (run dump_idm_actions.py)")
         else:
             warnings += self._calibration_warnings(actions)
-        video = next(iter(info.videos.values())).path if info.videos else None
-        if video is not None and not video.is_file():
-            warnings.append(f"generated video {video} not found: the arm alone is shown")
-            video = None
-        elif video is not None:
+        videos: dict[str, Path] = {}
+        several = len(info.videos) > 1
+        for camera, segment in info.videos.items():  # every camera is a view
+            video, which = segment.path, f"{camera}'s generated video" if several else "generated video"
+            if not video.is_file():
+                shown = "the arm alone is shown" if not several else "that view is not shown"
+                warnings.append(f"{which} {video} not found: {shown}")
+                continue
             n = probe(video).n_frames or len(VideoClip(video).timestamps())  # the header's count, else packets
             if abs(n - info.length) > FRAME_COUNT_SLACK:
-                warnings.append(f"the generated video has {n} frames, the episode {info.length} steps")
-        return Trajectory(info.index, info.task, self.is_dream(info), raw, actions, stamps, fps, video, warnings)
+                warnings.append(f"the {which} has {n} frames, the episode {info.length} steps")
+            videos[camera] = video
+        return Trajectory(info.index, info.task, self.is_dream(info), raw, actions, stamps, fps, videos, warnings)
 
     def _calibration_warnings(self, actions: npt.NDArray[np.float64]) -> list[str]:
         """A calibration that puts most steps past a joint limit is wrong for this data: say so."""
@@ -470,7 +480,7 @@ def rollout_args(tr: Trajectory, ds: NeuralTrajectories) -> dict[str, Any]:
     return dict(
         kind="single_chunk", prompt=tr.task, episode_index=None, start_frame=0, fps=tr.fps,
         executed_per_chunk=n, frames_per_chunk=n, actions=tr.actions[None],
-        videos={ds.cameras[0]: tr.video} if tr.video is not None else {},  # a video comes from a camera
+        videos=dict(tr.videos),
         extra={"source": {"format": LAYOUT, "path": str(ds.root.resolve()), "episode_index": tr.index,
                           "dream": tr.dream, "calibration": ds.calibration.to_json(), "fps": tr.fps,
                           "info_fps": ds.info_fps, "raw_range": {j: [float(lo), float(hi)] for j, lo, hi in
@@ -579,7 +589,7 @@ def format_layout(info: dict[str, Any]) -> str:
 def import_groot_dreams(src: str | Path, dest: str | Path, *, calibration: str | None = None,
                         overwrite: bool = False, log: Callable[[str], None] = print) -> Path:
     """Write every episode of the dump at ``src`` as a rollout of a new session at ``dest``
-    (``episode_NNNNNN``: the calibrated IDM actions, the generated video as view ``webcam``).
+    (``episode_NNNNNN``: the calibrated IDM actions, every camera's generated video as its view).
 
     All or nothing: an episode that cannot be read stops the import and nothing is written.
     """
@@ -596,7 +606,7 @@ def import_groot_dreams(src: str | Path, dest: str | Path, *, calibration: str |
             tr = ds.trajectory(info.index)
             writer.add_rollout(rollout_tag(info.index), **rollout_args(tr, ds))
             log(f"{rollout_tag(info.index)}: {tr.length} steps at {tr.fps:g} fps, "
-                f"{'video' if tr.video is not None else 'no video'}, {tr.task!r}"
+                f"{', '.join(tr.videos) or 'no video'}, {tr.task!r}"
                 + "".join(f"; warning: {w}" for w in tr.warnings))
     return Path(dest)
 

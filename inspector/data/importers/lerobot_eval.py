@@ -18,8 +18,10 @@ Each evaluated episode becomes one rollout of a single chunk spanning the episod
 ``action`` (what the policy commanded) where a rollout has its prediction, the recorded
 ``observation.state`` (what the arm executed) where it has GT, the predicted video as its imagined
 view and what the simulator rendered (the render, the env's cameras) as its GT views, one frame per
-step. Success and rewards come from ``eval_info.json`` (``extra.outcome``). Episodes without a
-recording have no joints: they are listed as errors saying so.
+step. Success and rewards come from ``eval_info.json`` (``extra.outcome``). An episode without a
+recording (lerobot-eval's default) is a video-only rollout: the predicted video, split into the
+env's cameras (its width over the render's), is its imagined views, the first named ``render``
+beside the simulator's render as its GT; one step per predicted frame, no joints.
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ from ...schema import number_problem, shown, whole_number
 from ...units import Units
 from ..lerobot_dataset import INFO_PATH, LeRobotDataset
 from ..session import SessionWriter, check_apart, check_json_size
-from ..video import VideoClip, encode_h264
+from ..video import VideoClip, encode_h264, probe
 from .dreamzero_so101 import tag_from_name
 
 FORMAT = "lerobot-eval"
@@ -288,8 +290,7 @@ def _retimed(clip: VideoClip, n_src: int, n: int) -> Iterator[npt.NDArray[np.uin
 
 def _episode_args(ep: EvalEpisode, scratch: Path, units: Units) -> dict[str, Any]:
     if ep.recording is None:
-        raise InspectorError(Path(RECORDINGS_DIR) / ep.task, f"episode {ep.index}: no recording, so no joints "
-                                                             "(lerobot-eval records them with --eval.recording=true)")
+        return _video_only_args(ep, scratch)
     ds, index = ep.recording
     require(ds.units.arm == units.arm, ds.root / INFO_PATH,
             f"arm units {ds.units.label()} differ from the session's {units.label()}")
@@ -326,6 +327,65 @@ def _episode_args(ep: EvalEpisode, scratch: Path, units: Units) -> dict[str, Any
                           "predicted": str(ep.predicted) if ep.predicted else None},
                "outcome": ep.outcome(), "arm_labels": dict(ARM_LABELS),
                **({"warnings": warnings} if warnings else {})},
+    )
+
+
+def split_count(predicted: Path, render: Path | None) -> int:
+    """How many camera views the predicted video holds side by side: its width over the render's
+    (one camera's image) when the heights agree and the width divides; one otherwise."""
+    if render is None:
+        return 1
+    pred, rend = probe(predicted), probe(render)
+    if pred.height == rend.height and rend.width > 0 and pred.width % rend.width == 0:
+        return max(1, pred.width // rend.width)
+    return 1
+
+
+def imagined_view_names(n_views: int) -> list[str]:
+    """The imagined views of a split predicted video: the first camera pairs with the simulator's
+    render (``env.render()`` shows the env's first camera), the others are numbered."""
+    return [RENDER_VIEW] + [f"camera_{i}" for i in range(1, n_views)]
+
+
+def _video_only_args(ep: EvalEpisode, scratch: Path) -> dict[str, Any]:
+    """An episode run without ``--eval.recording``: no joints, its predicted video split into the
+    env's camera views (the first beside the render, which is its GT), one step per frame."""
+    if ep.predicted is None and ep.render is None:
+        raise InspectorError(Path(VIDEOS_DIR) / ep.task, f"episode {ep.index}: neither a recording nor a video, "
+                                                         "so nothing to show (lerobot-eval records joints with "
+                                                         "--eval.recording=true)")
+    scratch.mkdir(parents=True)
+    first = ep.predicted if ep.predicted is not None else ep.render
+    assert first is not None
+    fps = probe(first).fps
+    n = len(VideoClip(first))
+    require(n >= 1, first, "video has no frames")
+    warnings = list(ep.warnings)
+    videos: dict[str, Path] = {}
+    gt_videos: dict[str, Path] = {}
+    if ep.render is not None:
+        clip = VideoClip(ep.render)
+        n_src = len(clip)
+        require(n_src >= 1, ep.render, "video has no frames")
+        if n_src not in (n, n + 1):
+            warnings.append(f"{ep.render.name}: {n_src} frames for {n} predicted; frames spread evenly over the steps")
+        gt_videos[RENDER_VIEW] = scratch / "gt_render.mp4"
+        encode_h264(gt_videos[RENDER_VIEW], _retimed(clip, n_src, n), fps)
+    if ep.predicted is not None:
+        k = split_count(ep.predicted, ep.render)
+        width = probe(ep.predicted).width // k
+        for i, view in enumerate(imagined_view_names(k)):
+            videos[view] = scratch / f"{view}.mp4"
+            encode_h264(videos[view], (rgb[:, i * width:(i + 1) * width] for _, rgb in
+                                       VideoClip(ep.predicted).iter_frames()), fps)
+    return dict(
+        kind="single_chunk", actions=None, n_chunks=1, horizon=n, prompt=ep.task, episode_index=None,
+        start_frame=0, fps=fps, executed_per_chunk=n, frames_per_chunk=n, videos=videos,
+        gt_videos=gt_videos, gt_episode_length=n,
+        extra={"source": {"format": FORMAT, "recording": None,
+                          "render": str(ep.render) if ep.render else None,
+                          "predicted": str(ep.predicted) if ep.predicted else None},
+               "outcome": ep.outcome(), **({"warnings": warnings} if warnings else {})},
     )
 
 
@@ -372,7 +432,8 @@ def import_eval(src: str | Path, dest: str | Path, *, overwrite: bool = False, k
                 log(f"{ep.tag}: error: {exc}")
                 continue
             log(f"{ep.tag}: {'success' if ep.success else 'failure'}, reward {ep.sum_reward}, "
-                f"{args['actions'].shape[1]} steps, prompt {args['prompt']!r}")
+                f"{args['horizon'] if args['actions'] is None else args['actions'].shape[1]} steps"
+                f"{' (video only)' if args['actions'] is None else ''}, prompt {args['prompt']!r}")
     return Path(dest), errors
 
 
@@ -408,13 +469,14 @@ def describe(src: Path) -> dict[str, Any]:
                      "sum_reward": ep.sum_reward, "max_reward": ep.max_reward,
                      "length": ep.recording[0].episode_info(ep.recording[1]).length if ep.recording else None,
                      "fps": fps, "predicted_video": ep.predicted is not None, "render": ep.render is not None,
+                     "video_only": ep.recording is None,
                      "cameras": cams})
     for t in tasks.values():
         t["success_rate"] = t["successes"] / t["episodes"]
     warnings = []
     unrecorded = sum(t["episodes"] - t["recorded"] for t in tasks.values())
     if unrecorded:
-        warnings.append(f"{unrecorded} episode(s) without a recording: no joints to show "
+        warnings.append(f"{unrecorded} episode(s) without a recording: video only, no joints "
                         "(lerobot-eval records them with --eval.recording=true)")
     unnamed = sorted({k for ep in episodes if ep.recording for k in ep.recording[0].unnamed_joints})
     if unnamed:
@@ -436,7 +498,8 @@ def format_description(info: dict[str, Any]) -> str:
         vids = [v for v, have in (("predicted", r["predicted_video"]), ("render", r["render"])) if have] + r["cameras"]
         reward = "-" if r["sum_reward"] is None else f"{r['sum_reward']:.3g}"
         lines.append(f"{r['tag']:<{width}} {'yes' if r['success'] else 'no':<7} {reward:>8} "
-                     f"{r['length'] if r['length'] is not None else '-':>6} {r['fps'] or '-':>5}  {', '.join(vids) or '-'}")
+                     f"{r['length'] if r['length'] is not None else '-':>6} {r['fps'] or '-':>5}  {', '.join(vids) or '-'}"
+                     f"{'  (video only)' if r.get('video_only') else ''}")
     lines += [f"warning: {w}" for w in info["warnings"]]
     lines += [f"{k} error: {v}" for k, v in info.get("errors", {}).items()]
     return "\n".join(lines)
