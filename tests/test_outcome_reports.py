@@ -68,8 +68,12 @@ def test_report_rates_carry_wilson_intervals(sessions) -> None:
     assert report["aggregate"]["success_overall"]["ci95"] == pytest.approx([ci.low, ci.high], abs=1e-9)
     row = report["rollouts"][0]
     assert row["task_outcome"]["source"] == "label" and set(row["outcome_sources"]) == {"label"}
-    text = _cli("report", a, "-j", "1").stdout
+    page = a.parent / "report.html"
+    text = _cli("report", a, "-j", "1", "--html", page).stdout
     assert f"Pick the red cube: 18/20 (90%, 95% CI {100 * ci.low:.0f}-{100 * ci.high:.0f}%)" in text
+    html = page.read_text()  # the rate's error bar spans the Wilson interval, and the table has the columns
+    assert f'data-lo="{ci.low:.6f}" data-hi="{ci.high:.6f}"' in html and 'class="error-bar"' in html
+    assert 'title="where the outcome comes from' in html
 
 
 def test_compare_says_which_is_better_at_18_vs_4(sessions) -> None:
