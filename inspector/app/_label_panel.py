@@ -43,7 +43,7 @@ class LabelPanel:
         gui = tab.client.gui
         with gui.add_folder("Label", order=order) as self.folder:
             self.status = gui.add_html("")
-            self.verdict = gui.add_button_group("Outcome", ("success", "fail", "clear"))
+            self.verdict = gui.add_button_group("Mark as", ("success", "fail", "clear"))
             self.progress = gui.add_slider("Progress %", 0, 100, 10, 0)
             self.failure = gui.add_dropdown("Failure tag", (NO_TAG, *FAILURE_TAGS))
             self.note = gui.add_text("Label note", "")
