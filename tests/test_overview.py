@@ -26,6 +26,7 @@ from inspector.app._overview_table import (
     Note,
     Query,
     compare_with_session,
+    comparison_html,
     figures_html,
     outcome_filters,
     scoped_css,
@@ -151,6 +152,14 @@ def test_outcome_filters_sorting_and_columns():
     assert keys(sort="success")[:3] == ["a / r1", "a / r2", "a / r0"]
     html = table_html(rows, select_rows(rows, Query(), notes), notes)
     assert "data-col='failure'>dropped" in html and "data-col='source'>sim" in html
+    a = [_row(f"a / r{i}", 1.0, session="a", tag=f"r{i}") for i in range(20)]
+    b = [_row(f"b / r{i}", 2.0, session="b", tag=f"r{i}") for i in range(20)]
+    labels = {**{f"a / r{i}": Note(outcome=make_record("label", success=i < 18)) for i in range(20)},
+              **{f"b / r{i}": Note(outcome=make_record("label", success=i < 4)) for i in range(20)}}
+    comparison = compare_with_session(a + b, Query(compare_with="b"), labels)
+    verdicts = {t["metric"]: t["verdict"] for t in comparison.result["tests"]}
+    assert verdicts["success"] == "A better" and verdicts["rmse_deg"] == "A better"
+    assert "<b>A better</b> at 95%" in comparison_html(comparison)
 
 
 def test_compare_with_a_session_pairs_rows_and_counts_winners():

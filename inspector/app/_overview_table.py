@@ -225,8 +225,11 @@ def compare_with_session(rows: Sequence[OverviewRow], q: Query, notes: Mapping[s
     side_a = [r for r in rows if r.session != q.compare_with and _matches(r, q, notes)]
     side_b = [r for r in rows if r.session == q.compare_with]
     done_a, done_b = [r for r in side_a if r.summary], [r for r in side_b if r.summary]
-    key_of = {id(r.summary): r.key for r in done_a + done_b}
-    result = compare_reports({"rollouts": [r.summary for r in done_a]}, {"rollouts": [r.summary for r in done_b]})
+    # each row with its effective outcome, so the comparison tests success too
+    with_outcome = {r.key: {**cast(dict, r.summary), "task_outcome": effective_of(r, notes)} for r in done_a + done_b}
+    key_of = {id(summary): key for key, summary in with_outcome.items()}
+    result = compare_reports({"rollouts": [with_outcome[r.key] for r in done_a]},
+                             {"rollouts": [with_outcome[r.key] for r in done_b]})
     pair_of = {key_of[id(p["a"])]: (key_of[id(p["b"])], p["delta_rmse_deg"], p["delta_time_aligned_drift_deg"])
                for p in result["pairs"]}
     waiting = sum(r.pending for r in side_a + side_b)
@@ -250,6 +253,10 @@ def comparison_html(c: Comparison) -> str:
     if d["n_compared"]:
         lines.append(f"time-aligned drift: A better in {d['a_better']}, B better in {d['b_better']}, "
                      f"ties {d['ties']}; mean Δ {num(d['mean_delta_deg'], '+.2f')} deg")
+    for t in c.result.get("tests", []):  # is each difference real (inspector.report.significance)
+        lo, hi = t["ci95"]
+        lines.append(f"{escape(t['metric'])}: <b>{escape(t['verdict'])}</b> at 95% (B − A {t['mean_diff']:+.3g}, "
+                     f"interval [{lo:+.3g}, {hi:+.3g}], {escape(t['test'].split(';')[0])} p {num(t['p'], '.3g')})")
     unpaired = [f"{len(c.result[f'unmatched_{side}'])} of {side.upper()}" for side in ("a", "b")
                 if c.result[f"unmatched_{side}"]]
     if unpaired:

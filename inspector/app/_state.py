@@ -214,6 +214,7 @@ class TabState:
             self._video_html = ""
             self.video.html.content = "<div style='font-size:0.8rem;color:#6b7280'>—</div>"
             self.pairs = []
+            self.label.refresh()  # a rollout that does not open may still be labelled
 
     def _show_loaded(self, keep_notes: bool = False) -> None:
         """Draw what changes per rollout: card, slider ranges, scene paths, plots, notes."""
