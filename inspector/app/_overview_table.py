@@ -18,6 +18,7 @@ from importlib import resources
 from typing import Any, cast
 
 from ..analysis.video_action import median_lag_label
+from ..outcomes import sim_record
 from ..report.compare import compare_reports
 from ..report.figures import report_figures
 from ..report.html import KIND_LABELS, figure_html
@@ -29,6 +30,8 @@ ALL_KINDS, ALL_SESSIONS, NO_COMPARE = "all kinds", "all sessions", "— none —
 FAILED = "failed episodes"  # a simulated evaluation's episodes that did not succeed
 KIND_FILTERS = {ALL_KINDS: None, "single-chunk": "single_chunk", "autoregressive": "autoregressive",
                 "open-loop replay": "open_loop_replay", "errors": "error", FAILED: "failed"}
+ALL_OUTCOMES, UNLABELLED, SUCCEEDED, FAILED_OUTCOME = "all outcomes", "without a label", "succeeded", "failed"
+TAG_FILTER = "failure: "  # + a tag
 PICKER_ORDER = "picker order"
 DELTA_RMSE = "Δ RMSE (B − A)"
 # Rows drawn in the table at most: the page holds what is on screen, filters narrow the rest.
@@ -78,6 +81,7 @@ class Query:
         session: :data:`ALL_SESSIONS` or a session's name.
         flagged_only, violations_only: keep flagged rows / rows with steps past a joint limit.
         compare_with: :data:`NO_COMPARE` or the name of session B (the table's rows are A).
+        outcome: an :func:`outcome_filters` label: all, unlabelled, succeeded, failed, or a failure tag.
     """
 
     sort: str = PICKER_ORDER
@@ -88,14 +92,17 @@ class Query:
     flagged_only: bool = False
     violations_only: bool = False
     compare_with: str = NO_COMPARE
+    outcome: str = ALL_OUTCOMES
 
 
 @dataclass(frozen=True)
 class Note:
-    """A rollout's flag and note from its session's annotations.json."""
+    """A rollout's flag and note from its session's annotations.json, and its effective outcome
+    (:func:`inspector.outcomes.effective_outcome`; None: none)."""
 
     flag: bool = False
     note: str = ""
+    outcome: Mapping[str, Any] | None = None
 
 
 @dataclass
@@ -121,7 +128,8 @@ def views_of(rows: Sequence[OverviewRow]) -> list[str]:
 
 
 def sort_options(rows: Sequence[OverviewRow], comparing: bool = False) -> list[str]:
-    return [PICKER_ORDER, *METRICS, *map(psnr_label, views_of(rows)), "flag", *([DELTA_RMSE] if comparing else [])]
+    return [PICKER_ORDER, *METRICS, *map(psnr_label, views_of(rows)), "flag", "success", "progress",
+            *([DELTA_RMSE] if comparing else [])]
 
 
 def _kind_of(row: OverviewRow) -> str:
@@ -133,11 +141,13 @@ def _matches(row: OverviewRow, q: Query, notes: Mapping[str, Note]) -> bool:
         return False
     kind = KIND_FILTERS.get(q.kind)
     if kind == "failed":
-        if (outcome := outcome_of(row)) is None or outcome.get("success") is not False:
+        if (effective_of(row, notes) or {}).get("success") is not False:
             return False
     elif kind is not None and _kind_of(row) != kind:
         return False
     if q.flagged_only and not notes.get(row.key, Note()).flag:
+        return False
+    if q.outcome != ALL_OUTCOMES and not _outcome_matches(effective_of(row, notes), q.outcome):
         return False
     if q.violations_only and not (row.summary and (limit_steps(row.summary) or 0) > 0):
         return False
@@ -145,11 +155,37 @@ def _matches(row: OverviewRow, q: Query, notes: Mapping[str, Note]) -> bool:
     return all(word in text for word in q.search.lower().split())
 
 
+def effective_of(row: OverviewRow, notes: Mapping[str, Note]) -> Mapping[str, Any] | None:
+    """The row's effective outcome: as read with its notes, else its simulated evaluation's verdict."""
+    return notes.get(row.key, Note()).outcome or sim_record(outcome_of(row))
+
+
+def outcome_filters(notes: Mapping[str, Note]) -> list[str]:
+    """The outcome filter's options: all, unlabelled, succeeded, failed and each failure tag in use."""
+    tags = sorted({str(n.outcome["failure"]) for n in notes.values() if n.outcome and n.outcome.get("failure")})
+    return [ALL_OUTCOMES, UNLABELLED, SUCCEEDED, FAILED_OUTCOME, *(TAG_FILTER + t for t in tags)]
+
+
+def _outcome_matches(outcome: Mapping[str, Any] | None, wanted: str) -> bool:
+    if wanted == UNLABELLED:
+        return outcome is None or outcome.get("source") != "label"
+    if outcome is None:
+        return False
+    if wanted == SUCCEEDED:
+        return outcome.get("success") is True
+    if wanted == FAILED_OUTCOME:
+        return outcome.get("success") is False
+    return wanted.startswith(TAG_FILTER) and outcome.get("failure") == wanted.removeprefix(TAG_FILTER)
+
+
 def sort_value(row: OverviewRow, sort: str, notes: Mapping[str, Note],
                comparison: Comparison | None = None) -> float | None:
     """The value a row sorts by (None: none; such rows come last)."""
     if sort == "flag":
         return 1.0 if notes.get(row.key, Note()).flag else 0.0
+    if sort in ("success", "progress"):
+        value = (effective_of(row, notes) or {}).get(sort)
+        return None if value is None else float(value)
     if sort == DELTA_RMSE:
         pair = comparison.pair_of.get(row.key) if comparison is not None else None
         return pair[1] if pair is not None else None
@@ -190,8 +226,11 @@ def compare_with_session(rows: Sequence[OverviewRow], q: Query, notes: Mapping[s
     side_a = [r for r in rows if r.session != q.compare_with and _matches(r, q, notes)]
     side_b = [r for r in rows if r.session == q.compare_with]
     done_a, done_b = [r for r in side_a if r.summary], [r for r in side_b if r.summary]
-    key_of = {id(r.summary): r.key for r in done_a + done_b}
-    result = compare_reports({"rollouts": [r.summary for r in done_a]}, {"rollouts": [r.summary for r in done_b]})
+    # each row with its effective outcome, so the comparison tests success too
+    with_outcome = {r.key: {**cast(dict, r.summary), "task_outcome": effective_of(r, notes)} for r in done_a + done_b}
+    key_of = {id(summary): key for key, summary in with_outcome.items()}
+    result = compare_reports({"rollouts": [with_outcome[r.key] for r in done_a]},
+                             {"rollouts": [with_outcome[r.key] for r in done_b]})
     pair_of = {key_of[id(p["a"])]: (key_of[id(p["b"])], p["delta_rmse_deg"], p["delta_time_aligned_drift_deg"])
                for p in result["pairs"]}
     waiting = sum(r.pending for r in side_a + side_b)
@@ -215,6 +254,10 @@ def comparison_html(c: Comparison) -> str:
     if d["n_compared"]:
         lines.append(f"time-aligned drift: A better in {d['a_better']}, B better in {d['b_better']}, "
                      f"ties {d['ties']}; mean Δ {num(d['mean_delta_deg'], '+.2f')} deg")
+    for t in c.result.get("tests", []):  # is each difference real (inspector.report.significance)
+        lo, hi = t["ci95"]
+        lines.append(f"{escape(t['metric'])}: <b>{escape(t['verdict'])}</b> at 95% (B − A {t['mean_diff']:+.3g}, "
+                     f"interval [{lo:+.3g}, {hi:+.3g}], {escape(t['test'].split(';')[0])} p {num(t['p'], '.3g')})")
     unpaired = [f"{len(c.result[f'unmatched_{side}'])} of {side.upper()}" for side in ("a", "b")
                 if c.result[f"unmatched_{side}"]]
     if unpaired:
@@ -250,15 +293,14 @@ def _metric_cell(label: str, fmt: str) -> Callable[[OverviewRow], str]:
     return lambda r: "" if r.summary is None else _f(METRICS[label](r.summary), fmt)
 
 
-def _outcome_cell(r: OverviewRow) -> str:
-    o = outcome_of(r)
-    if o is None or o.get("success") is None:
+def _success_cell(success: bool | None) -> str:
+    if success is None:
         return "–"
-    return "<span style='color:#2b8a3e'>✓</span>" if o["success"] else "<span style='color:#c92a2a'>✗</span>"
+    return "<span style='color:#2b8a3e'>✓</span>" if success else "<span style='color:#c92a2a'>✗</span>"
 
 
 def _columns(views: Sequence[str], notes: Mapping[str, Note], comparison: Comparison | None,
-             many_sessions: bool, outcomes: bool = False) -> list[_Column]:
+             many_sessions: bool, outcomes: bool = False, with_outcomes: bool = False) -> list[_Column]:
     def note_of(r: OverviewRow) -> Note:
         return notes.get(r.key, Note())
 
@@ -277,9 +319,20 @@ def _columns(views: Sequence[str], notes: Mapping[str, Note], comparison: Compar
                 False, "prompt"),
         _Column("episode", "GT episode @ start frame", episode, False),
     ]
-    if outcomes:  # a simulated evaluation: did the episode succeed, and its summed reward
-        cols += [_Column("success", "the episode succeeded in simulation", _outcome_cell, css="success"),
-                 _Column("reward", "summed reward of the episode", _metric_cell("reward", ".3g"), css="reward")]
+    if with_outcomes:  # did the task succeed: label, file or simulation
+        def outcome(r: OverviewRow) -> Mapping[str, Any]:
+            return effective_of(r, notes) or {}
+
+        cols += [_Column("success", "did the task succeed (the effective outcome)",
+                         lambda r: _success_cell(outcome(r).get("success")), css="success"),
+                 _Column("progress", "how far the task got [%]", lambda r: _f(outcome(r).get("progress"), ".0f"),
+                         css="progress"),
+                 _Column("failure", "how it failed", lambda r: escape(str(outcome(r).get("failure") or "")), False,
+                         "failure"),
+                 _Column("source", "where the outcome comes from: label, file, sim or recording",
+                         lambda r: escape(str(outcome(r).get("source") or "")), False, "source")]
+    if outcomes:  # a simulated evaluation: its summed reward
+        cols += [_Column("reward", "summed reward of the episode", _metric_cell("reward", ".3g"), css="reward")]
     cols += [
         _Column("RMSE °", "chunk RMSE over steps and joints [deg]", _metric_cell("RMSE", ".3f"), css="rmse"),
         _Column("time-al. °", "time-aligned drift, mean over in-episode steps [deg]",
@@ -343,7 +396,8 @@ def table_html(rows: Sequence[OverviewRow], shown: Sequence[OverviewRow], notes:
     cell its column (``data-col``); the rollout open in the tab is marked."""
     views = views_of(rows)
     cols = _columns(views, notes, comparison, len({r.session for r in rows}) > 1,
-                    outcomes=any(outcome_of(r) is not None for r in rows))
+                    outcomes=any(outcome_of(r) is not None for r in rows),
+                    with_outcomes=any(effective_of(r, notes) is not None for r in rows))
     head = "".join(f"<th title='{escape(c.tip)}'{' class=num' if c.numeric else ''}>{escape(c.header)}</th>"
                    for c in cols)
     body = []

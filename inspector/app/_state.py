@@ -42,6 +42,7 @@ from ._clip_clock import ClipClock
 from ._frames import FramePair
 from ._host import AppHost
 from ._keys import HOTKEYS
+from ._label_panel import LabelPanel
 from ._light_3d import apply_light_3d
 from ._overview import OverviewPanel
 from ._panels import NO_COMPARE, ControlPanel, PlotPanel, VideoPanel
@@ -126,6 +127,8 @@ class TabState:
             robot, self.robot_note = None, f"robot model failed to load ({type(exc).__name__}: {exc})"
         self.scene = TabScene(client, robot)
         self._wire()  # only now: a control moved earlier would find no scene
+        # the Label folder between the rollout card and the timeline: labelling is what a pass does most
+        self.label = LabelPanel(self, order=(self.controls.card.order + self.controls.timeline_folder.order) / 2)
         self.overview = OverviewPanel(self)
 
     # ------------------------------------------------------------------------------------------
@@ -212,6 +215,7 @@ class TabState:
             self._video_html = ""
             self.video.html.content = "<div style='font-size:0.8rem;color:#6b7280'>—</div>"
             self.pairs = []
+            self.label.refresh()  # a rollout that does not open may still be labelled
 
     def _show_loaded(self, keep_notes: bool = False) -> None:
         """Draw what changes per rollout: card, slider ranges, scene paths, plots, notes."""
@@ -238,6 +242,7 @@ class TabState:
         self._refresh_compare_info()
         if not keep_notes:
             self._load_notes()
+            self.label.refresh()
 
     def _refresh_card(self) -> None:
         loaded = self.loaded
