@@ -22,9 +22,10 @@ REPO = PACKAGE_DIR.parent
 
 # Layers, lowest first: a module may import from its own layer and those below it, never above.
 LAYERS = [
-    {"errors", "units", "schema", "cache", "progress", "_lazy", "_files"},
+    {"errors", "units", "schema", "cache", "progress", "_lazy", "_files", "stats"},
     {"robot"},
     {"data"},
+    {"outcomes"},
     {"eval"},
     {"analysis"},
     {"jobs"},

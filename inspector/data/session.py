@@ -53,6 +53,9 @@ SCHEMA = "inspector.session/1"
 SESSION_FILE = "session.json"
 ROLLOUT_FILE = "rollout.json"
 ANNOTATIONS_FILE = "annotations.json"
+# Outcomes (inspector.outcomes): in the session, or beside a raw directory imported in memory.
+OUTCOMES_FILE = "outcomes.json"
+OUTCOMES_SIDECAR_SUFFIX = ".inspector-outcomes.json"
 ROLLOUTS_DIR = "rollouts"
 ACTIONS_FILE = "actions.npy"
 STATES_FILE = "states.npy"
@@ -200,6 +203,9 @@ class Session:
     model: dict[str, Any]
     rollouts: dict[str, Rollout] = field(default_factory=dict)
     errors: dict[str, InspectorError] = field(default_factory=dict)
+    # where its outcomes live when not in the session directory: a raw directory imported in
+    # memory keeps them in a sidecar beside it (inspector.outcomes.sidecar_path)
+    outcomes_file: Path | None = None
 
     @property
     def dataset_root(self) -> Path | None:

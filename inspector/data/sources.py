@@ -25,7 +25,7 @@ from .importers.groot_dreams import LAYOUT_HINT as GROOT_DREAMS_HINT
 from .importers.groot_dreams import LAYOUT_TITLE as GROOT_DREAMS_TITLE
 from .importers.groot_dreams import is_groot_dreams, open_trajectories
 from .lerobot_dataset import INFO_PATH, REPO_ID, dataset_file_roots, find_dataset, is_lerobot_dataset, open_dataset
-from .session import Rollout, Session, is_rollout, is_session, open_session
+from .session import OUTCOMES_SIDECAR_SUFFIX, Rollout, Session, is_rollout, is_session, open_session
 
 # What a PATH may be besides a session, for the error a path none of them fits gets.
 RAW_LAYOUTS = ("a session (session.json)", "a LeRobot dataset (meta/info.json)",
@@ -135,6 +135,7 @@ def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine
         out._temps.append(handle)
         session = opened(session_path)
         record_import_sources(session, path, dataset)  # its cache entries are keyed by the source's files
+        session.outcomes_file = path.resolve().parent / f"{path.resolve().name}{OUTCOMES_SIDECAR_SUFFIX}"
         session.errors.update(errors)
         out.roots.append(Path(handle.name))
     if dataset is not None and session.dataset_root is None:

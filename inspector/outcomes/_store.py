@@ -1,0 +1,198 @@
+"""Reading and writing a session's ``outcomes.json`` (or a raw directory's sidecar): locked,
+atomic, and never overwriting a file that does not parse."""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import fcntl
+import os
+from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
+
+from ..data.session import OUTCOMES_FILE, OUTCOMES_SIDECAR_SUFFIX, read_json, write_json_atomic
+from ..errors import InspectorError
+from ..schema import mismatch, shown
+from ._record import (
+    FAILURE_TAGS,
+    FIELDS,
+    SCHEMA,
+    STORED_SOURCES,
+    TAG_PATTERN,
+    OutcomeRecord,
+    OutcomesDocument,
+    Source,
+    check_fields,
+    make_record,
+    now_iso,
+    says_something,
+)
+
+if TYPE_CHECKING:
+    from ..data.session import Session
+
+SIDECAR_SUFFIX = OUTCOMES_SIDECAR_SUFFIX
+
+
+
+def sidecar_path(raw_dir: str | Path) -> Path:
+    """Where the outcomes of a raw directory imported in memory live: beside it, never inside."""
+    raw = Path(raw_dir).resolve()
+    return raw.parent / f"{raw.name}{SIDECAR_SUFFIX}"
+
+
+def outcomes_path(session: Session) -> Path:
+    """The outcomes file of a loaded session (its sidecar when it was imported in memory)."""
+    sidecar = getattr(session, "outcomes_file", None)
+    return Path(sidecar) if sidecar is not None else Path(session.root) / OUTCOMES_FILE
+
+
+def _check_link(path: Path) -> None:
+    if path.is_symlink():
+        target, base = path.resolve(), path.parent.resolve()
+        if not target.is_relative_to(base):
+            raise InspectorError(path, f"resolves outside its directory (to {target}); not reading or writing it")
+
+
+def empty_document() -> OutcomesDocument:
+    return {"schema": SCHEMA, "failure_tags": [], "rollouts": {}}
+
+
+def read_outcomes(path: str | Path) -> OutcomesDocument:
+    """The outcomes document at ``path`` (empty when the file does not exist yet).
+
+    Raises:
+        InspectorError: the file exists but is not a valid outcomes document (naming the field);
+            it is never overwritten.
+    """
+    path = Path(path)
+    _check_link(path)
+    if not os.path.lexists(path):
+        return empty_document()
+    try:
+        data = read_json(path)
+        problem = _document_problem(data)
+    except InspectorError as exc:
+        raise InspectorError(path, f"{exc.what}; not overwriting it") from None
+    if problem:
+        raise InspectorError(path, f"{problem}; not overwriting it")
+    return cast(OutcomesDocument, data)
+
+
+def _document_problem(data: Any) -> str | None:
+    if not isinstance(data, dict):
+        return f"(top level): expected an object, found {shown(data)}"
+    if data.get("schema") != SCHEMA:
+        return f"schema: expected {SCHEMA!r}, found {shown(data.get('schema'))}"
+    tags = data.get("failure_tags", [])
+    if not isinstance(tags, list) or not all(isinstance(t, str) and TAG_PATTERN.match(t) for t in tags):
+        return "failure_tags: expected a list of tags (lower case, digits, _)"
+    data.setdefault("failure_tags", [])
+    rollouts = data.setdefault("rollouts", {})
+    if not isinstance(rollouts, dict):
+        return f"rollouts: expected an object, found {shown(rollouts)}"
+    known = (*FAILURE_TAGS, *tags)
+    for tag, by_source in rollouts.items():
+        if not isinstance(by_source, dict):
+            return f"rollouts.{tag}: expected an object, found {shown(by_source)}"
+        for source, record in by_source.items():
+            where = f"rollouts.{tag}.{source}"
+            if source not in STORED_SOURCES:
+                return f"{where}: not a stored source ({', '.join(STORED_SOURCES)})"
+            problem = mismatch(record, OutcomeRecord, where)
+            if problem:
+                return problem
+            try:
+                check_fields({k: record[k] for k in FIELDS}, known)
+            except ValueError as exc:
+                return f"{where}.{exc}"
+            if record["source"] != source:
+                return f"{where}.source: expected {source!r}, found {shown(record['source'])}"
+    return None
+
+
+def known_failure_tags(document: Mapping[str, Any]) -> tuple[str, ...]:
+    return (*FAILURE_TAGS, *(t for t in document.get("failure_tags", []) if t not in FAILURE_TAGS))
+
+
+@contextlib.contextmanager
+def _locked(path: Path) -> Iterator[None]:
+    lock = path.parent / f".{path.name}.lock"
+    try:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise InspectorError(lock, "is a symbolic link; refusing to follow it") from None
+        raise
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        for tmp in path.parent.glob(f".{path.name}.*.tmp"):  # left by a writer killed mid-write
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+        yield
+    finally:
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        os.close(fd)
+
+
+def update_outcome(path: str | Path, tag: str, changes: Mapping[str, Any], *, source: Source = "label",
+                   set_by: str | None = "app") -> OutcomeRecord | None:
+    """Change some fields of one rollout's ``source`` record (a label, by default); the fields
+    not named keep what is on disk now, as do all other rollouts and sources.
+
+    ``changes`` may set ``success`` / ``progress`` / ``failure`` to None to clear them; a record
+    left saying nothing and with no note is removed.
+
+    Returns:
+        The record after the change (None: removed).
+
+    Raises:
+        ValueError: a bad field (``"<field>: <what>"``).
+        InspectorError: the file on disk is not a valid outcomes document (left as it is).
+    """
+    path = Path(path)
+    _check_link(path)
+    with _locked(path):
+        document = read_outcomes(path)
+        checked = check_fields(changes, known_failure_tags(document))
+        by_source = document["rollouts"].setdefault(tag, {})
+        record = cast(dict[str, Any], by_source.get(source) or make_record(source))
+        record.update(checked, set_at=now_iso(), set_by=set_by)
+        kept: OutcomeRecord | None = cast(OutcomeRecord, record)
+        if not says_something(record) and not record["note"]:
+            by_source.pop(source, None)
+            kept = None
+        else:
+            by_source[source] = cast(OutcomeRecord, record)
+        if not by_source:
+            document["rollouts"].pop(tag, None)
+        write_json_atomic(path, document)
+        return kept
+
+
+def store_records(path: str | Path, records: Mapping[str, Mapping[str, Any]], *, source: Source,
+                  set_by: str | None, add_tags: Sequence[str] = ()) -> None:
+    """Replace the ``source`` record of each rollout in ``records`` (tag -> fields), in one write.
+
+    Raises:
+        ValueError: a bad field or tag.
+        InspectorError: the file on disk is not a valid outcomes document.
+    """
+    path = Path(path)
+    _check_link(path)
+    for t in add_tags:
+        if not TAG_PATTERN.match(t):
+            raise ValueError(f"failure tag {t!r}: lower case letters, digits and _, starting with a letter")
+    with _locked(path):
+        document = read_outcomes(path)
+        document["failure_tags"] += [t for t in add_tags if t not in known_failure_tags(document)]
+        known = known_failure_tags(document)
+        at = now_iso()
+        for tag, fields in records.items():
+            record = make_record(source, set_at=at, set_by=set_by)
+            cast(dict[str, Any], record).update(check_fields(fields, known))
+            document["rollouts"].setdefault(tag, {})[source] = record
+        write_json_atomic(path, document)
+
+

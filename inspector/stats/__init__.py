@@ -1,0 +1,47 @@
+"""Intervals and tests for deciding on an evaluation: is a success rate what it seems, is B better
+than A or is the difference noise, and how many rollouts would settle it.
+
+Each function is reproducible from its inputs alone (the bootstrap is seeded) and is checked
+against scipy in ``tests/test_stats.py``:
+
+- :func:`wilson_interval`: the Wilson score interval of a binomial proportion (Wilson 1927,
+  "Probable inference, the law of succession, and statistical inference", JASA 22), as
+  ``scipy.stats.binomtest(k, n).proportion_ci(method="wilson")``.
+- :func:`newcombe_interval`: the interval of a difference of two independent proportions built
+  from their Wilson intervals (Newcombe 1998, "Interval estimation for the difference between
+  independent proportions", Statistics in Medicine 17, method 10).
+- :func:`paired_bootstrap`: Efron's percentile bootstrap of the mean of paired differences
+  (Efron & Tibshirani 1993, "An Introduction to the Bootstrap", ch. 13), as
+  ``scipy.stats.bootstrap(method="percentile")`` with the same generator.
+- :func:`mcnemar_exact`: McNemar's test on paired successes, exact (McNemar 1947): the discordant
+  pairs under H0 are Binomial(b + c, 1/2).
+- :func:`fisher_exact` / :func:`barnard_exact`: two independent success counts (scipy's tests).
+- :func:`rollouts_needed`: the rollouts per side at which an observed difference of two rates
+  would be significant with a given power (the normal-approximation sample size for two
+  proportions, Fleiss, Levin & Paik 2003, "Statistical Methods for Rates and Proportions", eq. 4.14,
+  without continuity correction).
+"""
+
+from __future__ import annotations
+
+from ._intervals import BOOTSTRAP_RESAMPLES as BOOTSTRAP_RESAMPLES
+from ._intervals import BOOTSTRAP_SEED as BOOTSTRAP_SEED
+from ._intervals import BootstrapResult as BootstrapResult
+from ._intervals import newcombe_interval as newcombe_interval
+from ._intervals import paired_bootstrap as paired_bootstrap
+from ._intervals import wilson_interval as wilson_interval
+from ._tests import NO_DIFFERENCE as NO_DIFFERENCE
+from ._tests import TestResult as TestResult
+from ._tests import Verdict as Verdict
+from ._tests import barnard_exact as barnard_exact
+from ._tests import fisher_exact as fisher_exact
+from ._tests import mcnemar_exact as mcnemar_exact
+from ._tests import rollouts_needed as rollouts_needed
+from ._tests import verdict_from_interval as verdict_from_interval
+from ._tests import verdict_from_test as verdict_from_test
+
+__all__ = [
+    "BOOTSTRAP_RESAMPLES", "BOOTSTRAP_SEED", "NO_DIFFERENCE", "BootstrapResult", "TestResult", "Verdict",
+    "barnard_exact", "fisher_exact", "mcnemar_exact", "newcombe_interval", "paired_bootstrap",
+    "rollouts_needed", "verdict_from_interval", "verdict_from_test", "wilson_interval",
+]
