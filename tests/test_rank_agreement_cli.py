@@ -16,6 +16,7 @@ from scipy import stats
 from inspector.cli import main
 from inspector.data.session import SessionWriter
 from inspector.data.votes import Side, new_vote, read_votes, save_vote, votes_path
+from inspector.outcomes import OUTCOMES_FILE, store_records
 
 TASKS = ("pick the cube", "open the drawer")
 CHECKPOINTS = ("ckpt-a", "ckpt-b", "ckpt-c", "ckpt-d")
@@ -41,16 +42,23 @@ def _main(capsys, *argv: str | Path) -> tuple[int, str, str]:
 
 
 def _write_session(dest: Path, checkpoint: str, successes: dict[str, int], name: str | None = None,
-                   n: int = ROLLOUTS) -> Path:
+                   n: int = ROLLOUTS, judged_by: str = "file") -> Path:
     """A session of ``checkpoint``: per task, ``n`` rollouts from starts 0..n-1, the first
-    ``successes[task]`` of them successful (progress 1.0, the others 0.3)."""
+    ``successes[task]`` of them successful (progress 100 %, the others 30 %), judged in an
+    outcomes file (``judged_by="file"``, as a judge writes) or by a simulator (``"sim"``: the
+    rollout's ``extra.outcome``, as lerobot-eval's import writes; it has no progress)."""
+    records = {}
     with SessionWriter.create(dest, name=name or dest.name, model={"name": checkpoint}) as writer:
         for t, task in enumerate(successes):
             for i in range(n):
                 ok = i < successes[task]
-                writer.add_rollout(f"t{t}_r{i:02d}", kind="single_chunk", actions=np.zeros((1, 4, 6)), prompt=task, executed_per_chunk=4,
-                                   episode_index=t, start_frame=i,
-                                   extra={"outcome": {"success": ok, "progress": 1.0 if ok else 0.3, "task": task}})
+                tag = f"t{t}_r{i:02d}"
+                writer.add_rollout(tag, kind="single_chunk", actions=np.zeros((1, 4, 6)), prompt=task,
+                                   executed_per_chunk=4, episode_index=t, start_frame=i,
+                                   extra={"outcome": {"success": ok, "task": task}} if judged_by == "sim" else None)
+                records[tag] = {"success": ok, "progress": 100.0 if ok else 30.0}
+    if judged_by == "file":
+        store_records(dest / OUTCOMES_FILE, records, source="file", set_by="judge.jsonl")
     return dest
 
 
@@ -142,8 +150,8 @@ def _vote(a: Path, ta: str, b: Path, tb: str, answer: str) -> None:
     save_vote(new_vote(Side(str(a.resolve()), a.name, ta), Side(str(b.resolve()), b.name, tb), answer))
 
 
-def test_rank_without_votes_ranks_by_success_with_wilson_intervals(sides):
-    _, real = sides
+def test_rank_without_votes_ranks_by_success_with_wilson_intervals(tmp_path):
+    real = [_write_session(tmp_path / c, c, {t: REAL[(c, t)] for t in TASKS}, judged_by="sim") for c in CHECKPOINTS]
     run = _cli("rank", *real, "--json")
     assert run.returncode == 0, run.stderr
     out = json.loads(run.stdout)
@@ -196,7 +204,7 @@ def test_rank_bad_votes_are_one_line_naming_the_file(tmp_path, capsys):
     good["votes"][0]["b"]["rollout"] = "t0_r01"
     for bad, expected in ((("answer", "maybe"), "votes[0].answer: expected 'a' or 'b' or 'tie', found 'maybe'"),
                           (("a", {"session": str(a), "name": "a", "rollout": "t0_r00", "progress": "high"}),
-                           "votes[0].a.progress: expected a number from 0 to 1 or null, found 'high'"),
+                           "votes[0].a.progress: expected a number from 0 to 100 or null, found 'high'"),
                           (("time", 12), "votes[0].time: expected a string, found 12")):
         doc = json.loads(json.dumps(good))
         doc["votes"][0][bad[0]] = bad[1]

@@ -56,9 +56,9 @@ def test_a_broken_vote_file_is_never_overwritten(tmp_path):
 
 def test_a_vote_round_trips_with_progress_and_note(tmp_path):
     a, b = _session(tmp_path / "a"), _session(tmp_path / "b")
-    vote = new_vote(Side(str(a), "a", "r0", progress=0.75), Side(str(b), "b", "r0", progress=0.0), "a", note="A grasps")
+    vote = new_vote(Side(str(a), "a", "r0", progress=75.0), Side(str(b), "b", "r0", progress=0.0), "a", note="A grasps")
     save_vote(vote)
     assert read_votes(a) == [vote] == read_votes(b)
     assert json.loads(votes_path(a).read_text())["schema"] == "inspector.votes/1"
     with pytest.raises(ValueError, match="progress"):
-        new_vote(Side(str(a), "a", "r0", progress=1.5), Side(str(b), "b", "r0"), "tie")
+        new_vote(Side(str(a), "a", "r0", progress=101.0), Side(str(b), "b", "r0"), "tie")

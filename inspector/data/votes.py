@@ -12,11 +12,12 @@ Layout::
     {"schema": "inspector.votes/1",
      "votes": [{"id": "<hex>", "time": "<ISO time>", "answer": "a" | "b" | "tie",
                 "a": {"session": "<absolute session directory>", "name": "<session name>",
-                      "rollout": "<tag>", "progress": 0.0..1.0 | null},
+                      "rollout": "<tag>", "progress": 0..100 | null},
                 "b": {...}, "note": "..."}]}
 
 ``answer`` says which side was better (``tie``: neither). ``progress`` is the evaluator's score of
-how far that rollout got through the task, 0 to 1, when given.
+how far that rollout got through the task [%], 0 to 100 as in the
+outcome records (:mod:`inspector.outcomes`), when given.
 """
 
 from __future__ import annotations
@@ -136,8 +137,8 @@ def _parse_vote(entry: Any, field: str, path: Path) -> Vote:
                 raise fail(f"{field}.{name}.{key}", "a non-empty string", side.get(key))
         progress = side.get("progress")
         if progress is not None and (isinstance(progress, bool) or not isinstance(progress, (int, float))
-                                     or not 0.0 <= progress <= 1.0):
-            raise fail(f"{field}.{name}.progress", "a number from 0 to 1 or null", progress)
+                                     or not 0.0 <= progress <= 100.0):
+            raise fail(f"{field}.{name}.progress", "a number from 0 to 100 or null", progress)
         sides.append(Side(side["session"], side["name"], side["rollout"],
                           None if progress is None else float(progress)))
     return Vote(entry["id"], entry["time"], entry["answer"], sides[0], sides[1], entry.get("note", ""))
@@ -148,8 +149,8 @@ def new_vote(a: Side, b: Side, answer: str, note: str = "") -> Vote:
     if answer not in ANSWERS:
         raise ValueError(f"answer must be one of {ANSWERS} (got {answer!r})")
     for side in (a, b):
-        if side.progress is not None and not (math.isfinite(side.progress) and 0.0 <= side.progress <= 1.0):
-            raise ValueError(f"progress must be from 0 to 1 (got {side.progress})")
+        if side.progress is not None and not (math.isfinite(side.progress) and 0.0 <= side.progress <= 100.0):
+            raise ValueError(f"progress must be from 0 to 100 % (got {side.progress})")
     return Vote(uuid.uuid4().hex, datetime.now(timezone.utc).isoformat(timespec="milliseconds"), answer, a, b,
                 str(note)[:MAX_NOTE_CHARS])
 

@@ -19,7 +19,7 @@ import numpy as np
 from ..analysis.agreement import DEFAULT_BOOTSTRAP, MIN_POINTS, STATISTICS, Point, agreement, confusion
 from ..data.session import Session
 from ..errors import InspectorError
-from .outcome_values import judged, model_label, open_sessions, task_of
+from .outcome_values import judged, model_label, open_sessions, session_outcomes, task_of
 
 By = Literal["success", "progress"]
 CONFIDENCE = 0.95
@@ -33,9 +33,10 @@ def _values(sessions: Sequence[Session], by: By, rename: Mapping[str, str]) -> t
     unjudged = 0
     for session in sessions:
         checkpoint = rename.get(model_label(session), model_label(session))
+        outcomes = session_outcomes(session)
         for tag in sorted(session.rollouts):
             rollout = session.rollouts[tag]
-            outcome = judged(rollout)
+            outcome = judged(outcomes, tag, rollout)
             value = outcome.progress if by == "progress" else outcome.success
             if value is None:
                 unjudged += 1

@@ -1,8 +1,6 @@
-"""Sessions opened for ranking and agreement, and what each rollout's outcome says.
-
-A rollout's outcome lives in its ``extra.outcome`` (a simulated evaluation's verdict, a judge's
-file, a person's label): ``success`` (true/false) and, where judged, ``progress`` (0 to 1).
-"""
+"""Sessions opened for ranking and agreement, and what each rollout's effective outcome says
+(:func:`inspector.outcomes.effective_outcome`: a person's label, else a judge's file, else the
+simulator's verdict, else the recording's ``next.success``)."""
 
 from __future__ import annotations
 
@@ -15,6 +13,7 @@ from typing import Any
 
 from ..data.session import Rollout, Session, is_session, open_session
 from ..errors import InspectorError
+from ..outcomes import SessionOutcomes, effective_outcome, load_session_outcomes
 
 
 def open_sessions(paths: Sequence[str | Path], flag: str = "PATH") -> list[Session]:
@@ -58,21 +57,32 @@ def model_label(session: Session) -> str:
 
 @dataclass(frozen=True)
 class Judged:
-    """One rollout's outcome: success (None when not judged) and progress (None when not scored)."""
+    """One rollout's outcome: success (None when not judged) and progress as a fraction 0..1 of the
+    task (None when not scored; the outcome records keep it in percent)."""
 
     success: bool | None
     progress: float | None
 
 
-def judged(rollout: Rollout) -> Judged:
-    outcome: Any = rollout.extra.get("outcome")
-    if not isinstance(outcome, dict):
+def session_outcomes(session: Session) -> SessionOutcomes:
+    """The session's outcomes from every source.
+
+    Raises:
+        InspectorError: its outcomes file (or its dataset's ``next.success``) cannot be read.
+    """
+    outcomes = load_session_outcomes(session)
+    if outcomes.error is not None:
+        raise outcomes.error
+    return outcomes
+
+
+def judged(outcomes: SessionOutcomes, tag: str, rollout: Rollout) -> Judged:
+    record = effective_outcome(outcomes.sources(tag, rollout))
+    if record is None:
         return Judged(None, None)
-    success = outcome.get("success")
-    progress = outcome.get("progress")
-    return Judged(success if isinstance(success, bool) else None,
-                  float(progress) if isinstance(progress, (int, float)) and not isinstance(progress, bool)
-                  and math.isfinite(progress) else None)
+    progress = record.get("progress")
+    return Judged(record.get("success"),
+                  None if progress is None or not math.isfinite(progress) else float(progress) / 100.0)
 
 
 def task_of(rollout: Rollout) -> str:

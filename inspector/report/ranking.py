@@ -15,7 +15,8 @@ from ..analysis.ranking import DEFAULT_BOOTSTRAP, LOSS, TIE, WIN, rank_sessions
 from ..data.session import Session
 from ..data.votes import Vote, merged_votes, votes_path
 from ..errors import InspectorError
-from .outcome_values import judged, model_label, open_sessions, session_labels
+from ..stats import wilson_interval
+from .outcome_values import judged, model_label, open_sessions, session_labels, session_outcomes
 
 CONFIDENCE = 0.95
 _SCORE = {"a": WIN, "b": LOSS, "tie": TIE}
@@ -72,16 +73,15 @@ def _check_rollouts(vote: Vote, a: Session, b: Session) -> None:
 
 
 def _by_success(sessions: Sequence[Session], labels: Sequence[str]) -> dict[str, Any]:
-    from scipy.stats import binomtest
-
     rows: list[dict[str, Any]] = []
     for label, session in zip(labels, sessions):
-        outcomes = [judged(r).success for r in session.rollouts.values()]
-        known = [s for s in outcomes if s is not None]
+        outcomes = session_outcomes(session)
+        verdicts = [judged(outcomes, tag, r).success for tag, r in session.rollouts.items()]
+        known = [s for s in verdicts if s is not None]
         successes = sum(known)
         if known:
-            ci = binomtest(successes, len(known)).proportion_ci(CONFIDENCE, method="wilson")
-            low, high, rate = float(ci.low), float(ci.high), successes / len(known)
+            low, high = wilson_interval(successes, len(known), CONFIDENCE)
+            rate = successes / len(known)
         else:
             low = high = rate = None  # type: ignore[assignment]
         rows.append({"session": label, "model": model_label(session), "success_rate": rate, "low": low,
