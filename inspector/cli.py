@@ -146,7 +146,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     check_listenable(args.host, args.port)
     serve(args.paths, host=args.host, port=args.port, share=args.share, dataset=args.dataset,
           cache_mb=args.cache_mb, use_cache=not args.no_cache, exit_when_stopped=True,
-          calibration=args.calibration)
+          calibration=args.calibration, ab=args.ab)
     return 0
 
 
@@ -461,6 +461,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="memory for video frames sent to browsers, shared by all tabs "
                         f"(default {DEFAULT_FRAME_CACHE_MB})")
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the metrics cache")
+    p.add_argument("--ab", action="store_true",
+                   help="blind A/B comparison of two or more sessions (checkpoints): pairs from the same start, "
+                        "names hidden until the vote (keys A, B, =); votes go to each session's votes.json "
+                        "for inspector rank")
     _calibration_argument(p)
     p.set_defaults(func=_cmd_serve)
 
