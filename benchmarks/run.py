@@ -925,6 +925,40 @@ def bench_serve(tmp: Path, quick: bool) -> list[Figure]:
     return figures
 
 
+def bench_rank(tmp: Path, quick: bool) -> list[Figure]:
+    """Bradley-Terry intervals' coverage on simulated preferences, and ``inspector rank`` as a whole
+    process on 5 sessions with 200 votes in their votes.json."""
+    from inspector.analysis.ranking import rank_sessions, simulate_votes
+    from inspector.data.session import SessionWriter
+    from inspector.data.votes import Side, new_vote, save_vote
+
+    true = np.array([1.5, 0.75, 0.0, -0.75, -1.5])
+    rng = np.random.default_rng(0)
+    n_sims = 40 if quick else 400
+    covered = 0
+    for sim in range(n_sims):
+        # drawn from the model itself, which has no ties (a tie is a half win only in the fit)
+        fit = rank_sessions(5, *simulate_votes(true, 200, rng), n_bootstrap=1000, seed=sim)
+        covered += int(np.sum((fit.low <= true) & (true <= fit.high)))
+    coverage = covered / (5 * n_sims)
+    roots = []
+    for i in range(5):
+        with SessionWriter.create(tmp / f"rank_s{i}", model={"name": f"ckpt{i}"}) as w:
+            w.add_rollout("r0", kind="single_chunk", actions=np.zeros((1, 9, 6)))
+        roots.append((tmp / f"rank_s{i}").resolve())
+    first, second, score = simulate_votes(true, 200, rng, tie_probability=0.1)
+    for f, s_, sc in zip(first, second, score):
+        answer = "a" if sc == 1.0 else "b" if sc == 0.0 else "tie"
+        save_vote(new_vote(Side(str(roots[f]), f"s{f}", "r0"), Side(str(roots[s_]), f"s{s_}", "r0"), answer))
+    ours = run_process(inspector_cmd("rank", *map(str, roots), "--json"))
+    return [Figure("rank_interval_coverage", coverage, "fraction", "0.90 to 0.98 (nominal 0.95)",
+                   0.90 <= coverage <= 0.98,
+                   note=f"true strengths inside the 95% bootstrap intervals: 5 sessions (strengths -1.5 to 1.5), "
+                        f"200 votes drawn from the Bradley-Terry model, {n_sims} simulations"),
+            Figure("rank_200_votes", ours.wall_s, "s", "< 5 s and < 500 MB", ours.wall_s < 5 and ours.peak_mib < 500,
+                   ours.peak_mib, note="inspector rank on 5 sessions, 200 votes, 2000 bootstrap replicates")]
+
+
 # ----------------------------------------------------------------------------------------------
 
 
@@ -935,7 +969,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--latest", action="store_true",
                         help="merge the figures into benchmarks/latest.json (by name) and rewrite the table in "
                              "benchmarks/README.md")
-    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback keys groot eval clock")
+    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback keys groot eval clock rank")
     args = parser.parse_args(argv)
 
     figures: list[Figure] = []
@@ -955,6 +989,7 @@ def main(argv: list[str] | None = None) -> int:
             ("groot", lambda: bench_groot(tmp, args.quick)),
             ("eval", lambda: bench_eval(tmp, args.quick)),
             ("clock", lambda: bench_clock(tmp, args.quick)),
+            ("rank", lambda: bench_rank(tmp, args.quick)),
         ]
         for name, run in runs:
             if args.only and name not in args.only:

@@ -15,7 +15,6 @@ from ..analysis.ranking import DEFAULT_BOOTSTRAP, LOSS, TIE, WIN, rank_sessions
 from ..data.session import Session
 from ..data.votes import Vote, merged_votes, votes_path
 from ..errors import InspectorError
-from ..stats import wilson_interval
 from .outcome_values import judged, model_label, open_sessions, session_labels, session_outcomes
 
 CONFIDENCE = 0.95
@@ -73,6 +72,8 @@ def _check_rollouts(vote: Vote, a: Session, b: Session) -> None:
 
 
 def _by_success(sessions: Sequence[Session], labels: Sequence[str]) -> dict[str, Any]:
+    from ..stats import wilson_interval  # scipy.stats: seconds of imports that a ranking from votes does without
+
     rows: list[dict[str, Any]] = []
     for label, session in zip(labels, sessions):
         outcomes = session_outcomes(session)
