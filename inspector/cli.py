@@ -122,7 +122,8 @@ def _cmd_report(args: argparse.Namespace) -> int:
     from .report.build import build_report, format_report
 
     report = build_report(args.paths, dataset=args.dataset, jobs=args.jobs, use_cache=not args.no_cache,
-                          limit_margin_deg=args.limit_margin, ray=args.ray, calibration=args.calibration)
+                          limit_margin_deg=args.limit_margin, ray=args.ray, calibration=args.calibration,
+                          outcome_source=args.outcome_source)
     if args.html:
         from .report.html import write_report_html
 
@@ -135,8 +136,19 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     from .report.compare import build_comparison, format_comparison
 
     comparison = build_comparison(args.a, args.b, dataset=args.dataset, jobs=args.jobs,
-                                  use_cache=not args.no_cache, limit_margin_deg=args.limit_margin)
+                                  use_cache=not args.no_cache, limit_margin_deg=args.limit_margin,
+                                  outcome_source=args.outcome_source)
     _emit(json.dumps(comparison, indent=2) if args.json else format_comparison(comparison))
+    return 0
+
+
+def _cmd_outcomes_import(args: argparse.Namespace) -> int:
+    from .outcomes import import_outcomes
+
+    done = import_outcomes(args.file, args.path, add_tags=args.add_tag or ())
+    for row in done.unmatched:
+        print(f"warning: {args.file}: line {row.line}: {row.names()} matches no rollout", file=sys.stderr)
+    print(f"imported {done.rows} row(s) of {args.file} as the outcomes of {done.rollouts} rollout(s) into {done.store}")
     return 0
 
 
@@ -380,6 +392,11 @@ def _resolve(host: str, port: int) -> tuple[int, tuple] | OSError:
     return family, address
 
 
+def _outcome_source_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--outcome-source", choices=("label", "file", "sim", "recording"), default=None,
+                   help="the outcome tables use (default: a label over a file over sim/recording)")
+
+
 def _import_parser(formats: Any, name: str, what: str, src_help: str,
                    func: Callable[[argparse.Namespace], int]) -> argparse.ArgumentParser:
     """``inspector import NAME SRC -o DEST [--overwrite]``: what every format takes."""
@@ -437,6 +454,7 @@ def build_parser() -> argparse.ArgumentParser:
     _ray_argument(p, "compute the rollouts")
     _limit_margin_argument(p)
     _calibration_argument(p)
+    _outcome_source_argument(p)
     p.set_defaults(func=_cmd_report)
 
     p = sub.add_parser("compare", help="two evaluations rollout by rollout (e.g. two checkpoints)")
@@ -448,7 +466,17 @@ def build_parser() -> argparse.ArgumentParser:
                    help="worker processes (default: one per core; 1 computes in this process)")
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the metrics cache")
     _limit_margin_argument(p)
+    _outcome_source_argument(p)
     p.set_defaults(func=_cmd_compare)
+
+    p = sub.add_parser("outcomes", help="outcomes of rollouts from a file (a judge, a run sheet, a script)")
+    verbs = p.add_subparsers(dest="verb", required=True)
+    q = verbs.add_parser("import", help="store a JSON-lines or CSV file's outcomes (tag or episode per row)")
+    q.add_argument("file", help="outcomes file: .jsonl (one object per line) or .csv (a header row)")
+    q.add_argument("path", help="the session (or raw directory: then its sidecar) the rows belong to")
+    q.add_argument("--add-tag", action="append", metavar="NAME",
+                   help="a failure tag of the session's own, beside the standard ones (repeatable)")
+    q.set_defaults(func=_cmd_outcomes_import)
 
     p = sub.add_parser("serve", help="the web app (default: the bundled demo session)")
     p.add_argument("paths", nargs="*", help="sessions, rollouts, DreamZero-SO101 source dirs or LeRobot "

@@ -545,3 +545,64 @@ def test_arms_readout_and_video_play_on_one_clock(browser):
         page.close()
     finally:
         demo.stop()
+
+
+def test_labels_made_by_keyboard_are_in_report_from_another_process(browser, app):
+    """S / F / digits / T label the open rollout at once, N opens the next unlabelled one; a
+    report run as its own process reads the three labels."""
+    import json
+    import subprocess
+    import sys
+
+    page, tab = new_page(browser, app)
+    session_root = next(e.session.root for e in app.catalog.entries.values() if e.session is not None)
+    outcomes = session_root / "outcomes.json"
+    outcomes.unlink(missing_ok=True)  # a clean slate (a rerun finds the last try's labels)
+
+    def label_on_disk(tag: str) -> dict:
+        try:
+            return json.loads(outcomes.read_text())["rollouts"][tag]["label"]
+        except (OSError, ValueError, KeyError):
+            return {}
+
+    def press(key_name: str, tag: str, field: str, value) -> None:
+        page.keyboard.press(key_name)
+        wait_until(lambda: label_on_disk(tag).get(field) == value, timeout=30,
+                   what=f"{key_name} to save {field}={value!r} for {tag}")
+
+    def next_loaded(previous: str | None) -> str:
+        """Press N until a rollout that loads is open (a planted broken one is passed over)."""
+        while True:
+            page.keyboard.press("n")
+            wait_until(lambda: tab.key != previous and (tab.loaded is not None or tab.error is not None),
+                       what="N to open the next unlabelled rollout")
+            if tab.loaded is not None and tab.loaded.entry.tag != previous:
+                return tab.loaded.entry.tag
+            previous = tab.key
+
+    wait_until(lambda: tab.loaded is not None, what="the first rollout")
+    labelled = {}
+    first = tab.loaded.entry.tag
+    press("s", first, "success", True)
+    press("7", first, "progress", 70.0)
+    labelled[first] = (True, 70.0, None)
+    second = next_loaded(tab.key)
+    press("f", second, "success", False)
+    press("3", second, "progress", 30.0)
+    press("t", second, "failure", "missed_grasp")  # the first tag of the taxonomy
+    labelled[second] = (False, 30.0, "missed_grasp")
+    third = next_loaded(tab.key)
+    press("s", third, "success", True)
+    press("0", third, "progress", 100.0)
+    labelled[third] = (True, 100.0, None)
+    assert len(labelled) == 3
+    wait_until(lambda: "3 of 7 labelled" in page.locator(".inspector-label-queue").first.inner_text(),
+               what="the label queue to count three")
+    page.close()
+    done = subprocess.run([sys.executable, "-m", "inspector", "report", "--json", "-j", "1",
+                           *(session_root / "rollouts" / t for t in labelled)],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    rows = {r["tag"]: r["task_outcome"] for r in json.loads(done.stdout)["rollouts"]}
+    assert {t: (o["success"], o["progress"], o["failure"]) for t, o in rows.items()} == labelled
+    assert {o["source"] for o in rows.values()} == {"label"}

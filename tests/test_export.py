@@ -732,3 +732,27 @@ def test_chunk_starts_are_events_not_plot_markers(synthetic_export):
     assert not [e for e in rec.entities if "chunk_start" in e]
     texts = rec.temporal(L.EVENTS, "TextLog:text")[1]
     assert any("chunk 1 starts" in str(t) for t in texts)
+
+
+def test_outcomes_travel_in_the_recording(synthetic_session, tmp_path):
+    """A labelled rollout's recording carries every source as static text, the effective success
+    and progress as series, and still verifies."""
+    from inspector.export.outcomes import OUTCOME, PROGRESS_SERIES, SUCCESS_SERIES
+    from inspector.outcomes import store_records
+
+    store_records(synthetic_session / "outcomes.json", {"short": {"success": False, "progress": 40, "note": "judge"}},
+                  source="file", set_by="judge.jsonl")
+    store_records(synthetic_session / "outcomes.json", {"short": {"success": True, "progress": 90}},
+                  source="label", set_by="app")
+    try:
+        tl = build_timeline(open_session(synthetic_session).rollouts["short"])
+        path = write_recording(tl, tmp_path / "short.rrd")
+        rrd_verify(path)
+        rec = Recording(path)
+        text = rec.static(OUTCOME, "TextDocument:text")[0][0]
+        assert "**success** (source: label)" in text and "| file | False | 40.0 |" in text and "judge" in text
+        frames, success = rec.scalars(SUCCESS_SERIES, order_by=L.FRAME)
+        assert success.tolist() == [1.0, 1.0] and frames.tolist() == [tl.frame_index(0), tl.frame_index(tl.n_steps - 1)]
+        assert rec.scalars(PROGRESS_SERIES)[1].tolist() == [90.0, 90.0]
+    finally:
+        (synthetic_session / "outcomes.json").unlink()

@@ -27,12 +27,14 @@ from inspector.app._overview_table import (
     Query,
     compare_with_session,
     figures_html,
+    outcome_filters,
     scoped_css,
     select_rows,
     table_html,
 )
 from inspector.cache import MetricsCache
 from inspector.data.sources import BUNDLED_DEMO
+from inspector.outcomes import make_record
 
 DOCS_SCREENSHOT = Path(__file__).resolve().parents[1] / "docs" / "overview.png"
 OFFSET_DEG = 3.0
@@ -127,6 +129,28 @@ def test_sorting_and_filters_select_rows():
     assert keys(violations_only=True) == ["a / r4"]
     html = table_html(rows, select_rows(rows, Query(), notes), notes)
     assert html.count("<tr data-key=") == 5 and "actions.npy: truncated" in html and "look" in html
+
+
+def test_outcome_filters_sorting_and_columns():
+    """Rows filter by outcome (unlabelled, failed, a failure tag) and sort by success and progress;
+    the table shows the outcome's columns."""
+    rows = [_row(f"a / r{i}", 1.0) for i in range(5)]
+    notes = {"a / r0": Note(outcome=make_record("label", success=True, progress=100.0)),
+             "a / r1": Note(outcome=make_record("label", success=False, progress=20.0, failure="dropped")),
+             "a / r2": Note(outcome=make_record("sim", success=False)),
+             "a / r3": Note(flag=True)}
+
+    def keys(**q) -> list[str]:
+        return [r.key for r in select_rows(rows, Query(**q), notes)]
+
+    assert outcome_filters(notes)[-1] == "failure: dropped"
+    assert keys(outcome="without a label") == ["a / r2", "a / r3", "a / r4"]
+    assert keys(outcome="failed") == ["a / r1", "a / r2"]
+    assert keys(outcome="failure: dropped") == ["a / r1"]
+    assert keys(sort="progress", descending=True)[:2] == ["a / r0", "a / r1"]
+    assert keys(sort="success")[:3] == ["a / r1", "a / r2", "a / r0"]
+    html = table_html(rows, select_rows(rows, Query(), notes), notes)
+    assert "data-col='failure'>dropped" in html and "data-col='source'>sim" in html
 
 
 def test_compare_with_a_session_pairs_rows_and_counts_winners():

@@ -26,6 +26,15 @@ HOTKEYS = {
     "Next chunk": "pagedown",
     "Worst chunk": "W",
 }
+# The Label panel's keys (see ._label_panel): command label -> hotkey.
+LABEL_HOTKEYS = {
+    "Label: success": "S",
+    "Label: failure": "F",
+    **{f"Label: progress {10 * k}%": str(k) for k in range(1, 10)},
+    "Label: progress 100%": "0",
+    "Label: next failure tag": "T",
+    "Label: next unlabelled rollout": "N",
+}
 # Letters viser's keyboard camera moves by.
 CAMERA_LETTERS = frozenset("WASDQE")
 
@@ -41,7 +50,8 @@ document.documentElement.addEventListener('keydown', (e) => {
 
 def claimed_camera_codes() -> list[str]:
     """``KeyboardEvent.code`` of each hotkey that is also one of viser's camera keys."""
-    return sorted(f"Key{k}" for k in HOTKEYS.values() if k.upper() in CAMERA_LETTERS)
+    keys = [*HOTKEYS.values(), *LABEL_HOTKEYS.values()]
+    return sorted(f"Key{k}" for k in keys if k.upper() in CAMERA_LETTERS)
 
 
 KEYS_HTML = page_script_html("keys", _KEYS_JS.replace("__CLAIMED__", json.dumps(claimed_camera_codes())))

@@ -17,12 +17,15 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import replace
 
 from ..errors import InspectorError
 from ._annotations import read_annotations
 from ._cards import error_card
 from ._host import OverviewHost
+from ._overview_outcomes import row_outcomes, success_rate_html
 from ._overview_table import (
+    ALL_OUTCOMES,
     ALL_SESSIONS,
     KIND_FILTERS,
     MAX_TABLE_ROWS,
@@ -34,6 +37,7 @@ from ._overview_table import (
     comparison_html,
     figures_html,
     header_html,
+    outcome_filters,
     overview_css,
     select_rows,
     sort_options,
@@ -86,6 +90,7 @@ class OverviewPanel:
                 self.kind = gui.add_dropdown("Kind", tuple(KIND_FILTERS))
                 self.session = gui.add_dropdown("Session", (ALL_SESSIONS, *sessions), visible=many)
                 self.flagged = gui.add_checkbox("Flagged only", False)
+                self.outcome = gui.add_dropdown("Outcome", (ALL_OUTCOMES,), hint="unlabelled, failed, by failure tag")
                 self.violations = gui.add_checkbox("With limit violations", False)
                 self.compare = gui.add_dropdown("Compare with session", (NO_COMPARE, *sessions), visible=many,
                                                 hint="B: pairs the table's rows with this session's")
@@ -143,7 +148,8 @@ class OverviewPanel:
     def query(self) -> Query:
         return Query(sort=self.sort.value, descending=self.descending.value, search=self.search.value,
                      kind=self.kind.value, session=self.session.value, flagged_only=self.flagged.value,
-                     violations_only=self.violations.value, compare_with=self.compare.value)
+                     violations_only=self.violations.value, compare_with=self.compare.value,
+                     outcome=self.outcome.value)
 
     def draw(self, rows_arrived: bool = False) -> None:
         """Redraw the table, the compare summary and (when their rows changed) the figures.
@@ -157,16 +163,26 @@ class OverviewPanel:
             self._last_draw = time.monotonic()
             rows = self.store.rows()
             notes, notes_error = _notes(rows)
+            outcomes, outcomes_error = row_outcomes(rows, self.tab.app.catalog)
+            notes = {k: replace(notes.get(k, Note()), outcome=outcomes.get(k))
+                     for k in {*notes, *outcomes}}
+            notes_error = notes_error or outcomes_error
             q = self.query()
             comparison = compare_with_session(rows, q, notes)
             shown = select_rows(rows, q, notes, comparison)
             self.shown = shown
             with self.tab.client.atomic():
+                outcome_options = outcome_filters(notes)
+                if list(self.outcome.options) != outcome_options:  # failure tags appear as they are used
+                    chosen = self.outcome.value
+                    self.outcome.options = outcome_options
+                    self.outcome.value = chosen if chosen in outcome_options else ALL_OUTCOMES
                 options = sort_options(rows, comparison is not None)
                 if list(self.sort.options) != options:
                     self.sort.options = options  # PSNR views appear with their rows
-                self.header.content = header_html(rows, shown, self.store.n_cached) + (
-                    error_card("annotations.json is unreadable: flags and notes not shown", notes_error)
+                self.header.content = header_html(rows, shown, self.store.n_cached) + success_rate_html(
+                    shown, outcomes) + (
+                    error_card("annotations or outcomes unreadable: not shown", notes_error)
                     if notes_error is not None else "")
                 self.compare_info.visible = comparison is not None
                 if comparison is not None:
@@ -229,7 +245,7 @@ class OverviewPanel:
             return cb
 
         for control in (self.search, self.sort, self.descending, self.kind, self.session, self.flagged,
-                        self.violations, self.compare):
+                        self.violations, self.compare, self.outcome):
             control.on_update(user(self.draw))
         self.row.on_update(user(lambda: setattr(self, "_picked_key", self._option_to_key.get(self.row.value))))
         self.open_row.on_click(user(self.open_selected))

@@ -28,6 +28,8 @@ ALL_KINDS, ALL_SESSIONS, NO_COMPARE = "all kinds", "all sessions", "— none —
 FAILED = "failed episodes"  # a simulated evaluation's episodes that did not succeed
 KIND_FILTERS = {ALL_KINDS: None, "single-chunk": "single_chunk", "autoregressive": "autoregressive",
                 "open-loop replay": "open_loop_replay", "errors": "error", FAILED: "failed"}
+ALL_OUTCOMES, UNLABELLED, SUCCEEDED, FAILED_OUTCOME = "all outcomes", "without a label", "succeeded", "failed"
+TAG_FILTER = "failure: "  # + a tag
 PICKER_ORDER = "picker order"
 DELTA_RMSE = "Δ RMSE (B − A)"
 # Rows drawn in the table at most: the page holds what is on screen, filters narrow the rest.
@@ -77,6 +79,7 @@ class Query:
         session: :data:`ALL_SESSIONS` or a session's name.
         flagged_only, violations_only: keep flagged rows / rows with steps past a joint limit.
         compare_with: :data:`NO_COMPARE` or the name of session B (the table's rows are A).
+        outcome: an :func:`outcome_filters` label: all, unlabelled, succeeded, failed, or a failure tag.
     """
 
     sort: str = PICKER_ORDER
@@ -87,14 +90,17 @@ class Query:
     flagged_only: bool = False
     violations_only: bool = False
     compare_with: str = NO_COMPARE
+    outcome: str = ALL_OUTCOMES
 
 
 @dataclass(frozen=True)
 class Note:
-    """A rollout's flag and note from its session's annotations.json."""
+    """A rollout's flag and note from its session's annotations.json, and its effective outcome
+    (:func:`inspector.outcomes.effective_outcome`; None: none)."""
 
     flag: bool = False
     note: str = ""
+    outcome: Mapping[str, Any] | None = None
 
 
 @dataclass
@@ -120,7 +126,8 @@ def views_of(rows: Sequence[OverviewRow]) -> list[str]:
 
 
 def sort_options(rows: Sequence[OverviewRow], comparing: bool = False) -> list[str]:
-    return [PICKER_ORDER, *METRICS, *map(psnr_label, views_of(rows)), "flag", *([DELTA_RMSE] if comparing else [])]
+    return [PICKER_ORDER, *METRICS, *map(psnr_label, views_of(rows)), "flag", "success", "progress",
+            *([DELTA_RMSE] if comparing else [])]
 
 
 def _kind_of(row: OverviewRow) -> str:
@@ -132,11 +139,13 @@ def _matches(row: OverviewRow, q: Query, notes: Mapping[str, Note]) -> bool:
         return False
     kind = KIND_FILTERS.get(q.kind)
     if kind == "failed":
-        if (outcome := outcome_of(row)) is None or outcome.get("success") is not False:
+        if (notes.get(row.key, Note()).outcome or outcome_of(row) or {}).get("success") is not False:
             return False
     elif kind is not None and _kind_of(row) != kind:
         return False
     if q.flagged_only and not notes.get(row.key, Note()).flag:
+        return False
+    if q.outcome != ALL_OUTCOMES and not _outcome_matches(notes.get(row.key, Note()).outcome, q.outcome):
         return False
     if q.violations_only and not (row.summary and row.summary["limit_violations"]["steps"] > 0):
         return False
@@ -144,11 +153,33 @@ def _matches(row: OverviewRow, q: Query, notes: Mapping[str, Note]) -> bool:
     return all(word in text for word in q.search.lower().split())
 
 
+def outcome_filters(notes: Mapping[str, Note]) -> list[str]:
+    """The outcome filter's options: all, unlabelled, succeeded, failed and each failure tag in use."""
+    tags = sorted({str(n.outcome["failure"]) for n in notes.values() if n.outcome and n.outcome.get("failure")})
+    return [ALL_OUTCOMES, UNLABELLED, SUCCEEDED, FAILED_OUTCOME, *(TAG_FILTER + t for t in tags)]
+
+
+def _outcome_matches(outcome: Mapping[str, Any] | None, wanted: str) -> bool:
+    if wanted == UNLABELLED:
+        return outcome is None or outcome.get("source") != "label"
+    if outcome is None:
+        return False
+    if wanted == SUCCEEDED:
+        return outcome.get("success") is True
+    if wanted == FAILED_OUTCOME:
+        return outcome.get("success") is False
+    return wanted.startswith(TAG_FILTER) and outcome.get("failure") == wanted.removeprefix(TAG_FILTER)
+
+
 def sort_value(row: OverviewRow, sort: str, notes: Mapping[str, Note],
                comparison: Comparison | None = None) -> float | None:
     """The value a row sorts by (None: none; such rows come last)."""
     if sort == "flag":
         return 1.0 if notes.get(row.key, Note()).flag else 0.0
+    if sort in ("success", "progress"):
+        outcome = notes.get(row.key, Note()).outcome or {}
+        value = outcome.get(sort)
+        return None if value is None else float(value)
     if sort == DELTA_RMSE:
         pair = comparison.pair_of.get(row.key) if comparison is not None else None
         return pair[1] if pair is not None else None
@@ -249,11 +280,10 @@ def _metric_cell(label: str, fmt: str) -> Callable[[OverviewRow], str]:
     return lambda r: "" if r.summary is None else _f(METRICS[label](r.summary), fmt)
 
 
-def _outcome_cell(r: OverviewRow) -> str:
-    o = outcome_of(r)
-    if o is None or o.get("success") is None:
+def _success_cell(success: bool | None) -> str:
+    if success is None:
         return "–"
-    return "<span style='color:#2b8a3e'>✓</span>" if o["success"] else "<span style='color:#c92a2a'>✗</span>"
+    return "<span style='color:#2b8a3e'>✓</span>" if success else "<span style='color:#c92a2a'>✗</span>"
 
 
 def _columns(views: Sequence[str], notes: Mapping[str, Note], comparison: Comparison | None,
@@ -276,9 +306,20 @@ def _columns(views: Sequence[str], notes: Mapping[str, Note], comparison: Compar
                 False, "prompt"),
         _Column("episode", "GT episode @ start frame", episode, False),
     ]
-    if outcomes:  # a simulated evaluation: did the episode succeed, and its summed reward
-        cols += [_Column("success", "the episode succeeded in simulation", _outcome_cell, css="success"),
-                 _Column("reward", "summed reward of the episode", _metric_cell("reward", ".3g"), css="reward")]
+    if any(n.outcome for n in notes.values()):  # did the task succeed: label, file or simulation
+        def outcome(r: OverviewRow) -> Mapping[str, Any]:
+            return note_of(r).outcome or {}
+
+        cols += [_Column("success", "did the task succeed (the effective outcome)",
+                         lambda r: _success_cell(outcome(r).get("success")), css="success"),
+                 _Column("progress", "how far the task got [%]", lambda r: _f(outcome(r).get("progress"), ".0f"),
+                         css="progress"),
+                 _Column("failure", "how it failed", lambda r: escape(str(outcome(r).get("failure") or "")), False,
+                         "failure"),
+                 _Column("source", "where the outcome comes from: label, file, sim or recording",
+                         lambda r: escape(str(outcome(r).get("source") or "")), False, "source")]
+    if outcomes:  # a simulated evaluation: its summed reward
+        cols += [_Column("reward", "summed reward of the episode", _metric_cell("reward", ".3g"), css="reward")]
     cols += [
         _Column("RMSE °", "chunk RMSE over steps and joints [deg]", _metric_cell("RMSE", ".3f"), css="rmse"),
         _Column("time-al. °", "time-aligned drift, mean over in-episode steps [deg]",

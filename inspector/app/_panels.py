@@ -46,7 +46,7 @@ class ControlPanel:
         self.picker = gui.add_dropdown("Rollout", options, initial_value=options[0])
         self.error = gui.add_html("", visible=False)
         self.card = gui.add_html("")
-        with gui.add_folder("Timeline"):
+        with gui.add_folder("Timeline") as self.timeline_folder:
             # no hints on controls that are dragged: a tooltip would sit over the thumb and labels
             self.chunk = gui.add_slider("Chunk", 0, 1, 1, 0)
             self.step_in_chunk = gui.add_slider("Step in chunk", 0, 1, 1, 0)

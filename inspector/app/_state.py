@@ -42,6 +42,7 @@ from ._clip_clock import ClipClock
 from ._frames import FramePair
 from ._host import AppHost
 from ._keys import HOTKEYS
+from ._label_panel import LabelPanel
 from ._light_3d import apply_light_3d
 from ._overview import OverviewPanel
 from ._panels import NO_COMPARE, ControlPanel, PlotPanel, VideoPanel
@@ -125,6 +126,8 @@ class TabState:
             robot, self.robot_note = None, f"robot model failed to load ({type(exc).__name__}: {exc})"
         self.scene = TabScene(client, robot)
         self._wire()  # only now: a control moved earlier would find no scene
+        # the Label folder between the rollout card and the timeline: labelling is what a pass does most
+        self.label = LabelPanel(self, order=(self.controls.card.order + self.controls.timeline_folder.order) / 2)
         self.overview = OverviewPanel(self)
 
     # ------------------------------------------------------------------------------------------
@@ -235,6 +238,7 @@ class TabState:
         self._refresh_compare_info()
         if not keep_notes:
             self._load_notes()
+            self.label.refresh()
 
     def _refresh_card(self) -> None:
         loaded = self.loaded

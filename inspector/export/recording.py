@@ -42,6 +42,7 @@ from ..robot.kinematics import kinematics
 from . import layout as L
 from .arms import log_arms, prepare_meshes
 from .description import describe
+from .outcomes import log_outcomes
 from .series import log_markers, log_metric_series, log_psnr, log_video_action
 from .video import Progress, frame_indexes, log_view
 
@@ -161,6 +162,7 @@ def _log_recording(rec: rr.RecordingStream, tl: RolloutTimeline, views: list[str
     agreements = {v: va for v in psnr if (va := tl.video_action(v)) is not None}
     rec.log(L.DESCRIPTION, rr.TextDocument(describe(tl, mean_psnr, agreements), media_type="text/markdown"),
             static=True)
+    log_outcomes(rec, tl, steps_indexes)  # did the task succeed, by each source's account
     log_arms(rec, tl, steps_indexes(np.arange(tl.n_steps)))
     report(0.80, "metric series")
     log_metric_series(rec, tl, steps_indexes)

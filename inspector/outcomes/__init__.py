@@ -30,6 +30,8 @@ Layout::
 
 from __future__ import annotations
 
+from ._command import Imported as Imported
+from ._command import import_outcomes as import_outcomes
 from ._import_file import FileRow as FileRow
 from ._import_file import ImportResult as ImportResult
 from ._import_file import match_rows as match_rows
@@ -62,7 +64,7 @@ from ._store import update_outcome as update_outcome
 
 __all__ = [
     "FAILURE_TAGS", "FIELDS", "OUTCOMES_FILE", "PRECEDENCE", "SIDECAR_SUFFIX", "SOURCES", "STORED_SOURCES",
-    "FileRow", "ImportResult", "OutcomeRecord", "OutcomesDocument", "SessionOutcomes", "Source",
+    "FileRow", "ImportResult", "Imported", "import_outcomes", "OutcomeRecord", "OutcomesDocument", "SessionOutcomes", "Source",
     "check_fields", "effective_outcome", "known_failure_tags", "load_session_outcomes", "make_record",
     "match_rows", "outcomes_path", "read_outcome_file", "read_outcomes", "recording_outcomes",
     "rollout_sources", "says_something", "sidecar_path", "sim_record", "store_records", "update_outcome",

@@ -149,14 +149,17 @@ class ImportResult:
 
 def match_rows(rows: Sequence[FileRow], rollouts: Mapping[str, Rollout]) -> ImportResult:
     """Each row's rollouts: the one with its tag, or every rollout of its episode (at its start
-    frame, when given). A later row for the same rollout replaces an earlier one."""
+    frame, when given). A row naming a rollout more precisely wins over one naming it less (tag >
+    episode and start frame > episode); among equals, the later row wins."""
     by_episode: dict[int, list[str]] = {}
     for tag, r in sorted(rollouts.items()):
         if r.episode_index is not None:
             by_episode.setdefault(r.episode_index, []).append(tag)
     matched: dict[str, dict[str, Any]] = {}
     unmatched = []
-    for row in rows:
+    # the more specific a row, the later it applies: a tag beats an episode at a start frame,
+    # which beats a whole episode
+    for row in sorted(rows, key=lambda r: (r.tag is not None, r.start_frame is not None)):
         if row.tag is not None:
             tags = [row.tag] if row.tag in rollouts else []
         else:

@@ -24,6 +24,7 @@ from ..errors import InspectorError
 from ..jobs.pool import default_jobs, worker_count
 from ..jobs.ray import ray_workers
 from ..units import DEFAULT_LIMIT_MARGIN_DEG, JOINT_NAMES
+from .outcomes import attach_outcomes, outcome_lines, success_lines
 from .rows import aggregate, prompt_divergence_record, prompt_pairs
 from .tasks import EpisodeTask, Task, plan_episode_tasks, plan_tasks, run_tasks, run_tasks_on_ray
 from .trajectories import TRAJECTORY_LAYOUT, trajectory_table
@@ -38,7 +39,8 @@ CHAINED_TITLES = {
 def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | None = None,
                  use_cache: bool = True, limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG,
                  cache_dir: str | None = None, progress: bool | None = None,
-                 ray: str | None = None, calibration: str | None = None) -> dict[str, Any]:
+                 ray: str | None = None, calibration: str | None = None,
+                 outcome_source: str | None = None) -> dict[str, Any]:
     """Metrics for every rollout under ``paths`` (and every episode of the LeRobot datasets among
     them); what could not be read is listed under ``errors``.
 
@@ -55,6 +57,8 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
             ``ray://HOST:PORT``; see :mod:`inspector.jobs.ray`); ``jobs`` is then a local
             instance's CPUs, or a cluster's tasks at once (default: no limit).
         calibration: a GR00T-Dreams dump's calibration (``--calibration``; None: its default).
+        outcome_source: the outcome source tables use (``--outcome-source``; None: the precedence
+            rule of :func:`inspector.outcomes.effective_outcome`).
 
     Returns:
         ``{"rollouts", "aggregate", "prompt_divergence"?, "episodes"?, "neural_trajectories"?,
@@ -111,6 +115,7 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
                 raise InspectorError(where, "no rollouts to report")
             more = f" ({len(failed) - 1} more broken rollout(s))" if len(failed) > 1 else ""
             raise InspectorError(failed[0].file, failed[0].what + more)
+        outcome_warnings = attach_outcomes(sources, rows, outcome_source)  # after the cache: labels change
         keys = sorted(rows, key=order.__getitem__)
         dataset_roots = {str(d.root) for d in sources.datasets}
         session_keys = [k for k in keys if k[0] not in dataset_roots]
@@ -126,7 +131,7 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
             episodes = [e for e in episodes if e.get("layout") != TRAJECTORY_LAYOUT]
         if episodes:
             report["episodes"] = episodes
-        warnings = [f"{r['tag']}: {r['gt_warning']}" for r in ordered if r.get("gt_warning")]
+        warnings = [f"{r['tag']}: {r['gt_warning']}" for r in ordered if r.get("gt_warning")] + outcome_warnings
         if warnings:
             report["warnings"] = warnings
         if errors:
@@ -203,7 +208,9 @@ def format_report(report: dict[str, Any]) -> str:
                          f"{_f(mse[0] if mse else None):>10} {_f(mse[-1] if mse else None):>9} "
                          f"{r['limit_violations']['steps']:>9}{psnr_cells(r)}  {r['prompt']}")
         lines.append("")
-    lines += _evaluated_table(evaluated, report["aggregate"].get("success_by_task", []))
+    lines += _evaluated_table(evaluated)
+    lines += outcome_lines(rows)
+    lines += success_lines(report["aggregate"])
     for kind, auto in chained.items():
         if not auto:
             continue
@@ -263,9 +270,9 @@ def _episode_table(episodes: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
-def _evaluated_table(rows: list[dict[str, Any]], by_task: list[dict[str, Any]]) -> list[str]:
+def _evaluated_table(rows: list[dict[str, Any]]) -> list[str]:
     """Episodes of a simulated evaluation: success, reward, how closely the arm followed its
-    commands; then the success rate per task."""
+    commands (the success rate per task follows, with the other outcomes')."""
     if not rows:
         return []
     width = max([18] + [len(r["tag"]) for r in rows])
@@ -277,9 +284,6 @@ def _evaluated_table(rows: list[dict[str, Any]], by_task: list[dict[str, Any]]) 
         lines.append(f"{r['tag']:<{width}} {'yes' if o.get('success') else 'no':>7} {_f(o.get('sum_reward'), '.3g'):>8} "
                      f"{_f(o.get('max_reward'), '.3g'):>8} {r['steps_per_chunk']:>6} {_f(r['rmse_deg'], '.3f'):>9} "
                      f"{r['limit_violations']['steps']:>9}  {o.get('task')}")
-    lines += ["", "Success rate per task"]
-    lines += [f"  {t['task']}: {t['successes']}/{t['episodes']} ({100 * t['success_rate']:.0f}%), mean reward "
-              f"{_f(t['mean_sum_reward'], '.3g')}" for t in by_task]
     lines.append("")
     return lines
 

@@ -23,6 +23,7 @@ import numpy as np
 from ..errors import InspectorError
 from .build import build_report
 from .rows import nearest_tag as _nearest_tag
+from .significance import metric_tests, verdict_lines
 
 Row = dict[str, Any]
 # |b - a| at most this is a tie: identical inputs give identical numbers, but not bit for bit
@@ -142,7 +143,9 @@ def compare_reports(report_a: dict[str, Any], report_b: dict[str, Any]) -> dict[
         ``summary`` (RMSE: ``n_pairs``, ``n_compared`` with an RMSE on both sides, ``a_better``,
         ``b_better``, ``ties``, ``mean_delta_rmse_deg``, ``spearman_rmse``, ``wilcoxon_p``) and
         ``time_aligned_drift`` (the same for the mean time-aligned drift, compared over pairs
-        with GT joints on both sides). Differences are b - a, in data units.
+        with GT joints on both sides), ``tests`` (per metric: ``metric``, ``n_pairs``,
+        ``mean_diff``, ``ci95``, ``p``, ``test``, ``verdict``; see
+        :mod:`inspector.report.significance`). Differences are b - a, in data units.
     """
     matched, unmatched_a, unmatched_b = pair_rows(report_a["rollouts"], report_b["rollouts"])
     pairs: list[dict[str, Any]] = [
@@ -167,6 +170,8 @@ def compare_reports(report_a: dict[str, Any], report_b: dict[str, Any]) -> dict[
                                "mean_delta_deg": drift["mean_delta"], "spearman": drift["spearman"],
                                "wilcoxon_p": drift["wilcoxon_p"]},
     }
+    # is each difference real: interval, test and verdict per metric (inspector.report.significance)
+    out["tests"] = metric_tests([(a, b) for a, b, _ in matched], report_a["rollouts"], report_b["rollouts"])
     errors = {side: rep["errors"] for side, rep in (("a", report_a), ("b", report_b)) if rep.get("errors")}
     if errors:
         out["errors"] = errors
@@ -239,6 +244,7 @@ def format_comparison(c: dict[str, Any]) -> str:
     for side, errors in c.get("errors", {}).items():
         for err in errors.values():
             lines.append(f"error ({side.upper()}): {err}")
+    lines += verdict_lines(c.get("tests", []))
     return "\n".join(lines)
 
 

@@ -33,6 +33,7 @@ from ..errors import InspectorError
 from ..units import JOINT_NAMES
 from .episode_figures import episode_figures, episode_key, episode_summary_numbers
 from .figures import Figure, report_figures
+from .html_outcomes import outcome_columns, success_section
 from .svg import legend_html
 
 Row = dict[str, Any]
@@ -112,6 +113,7 @@ def _columns(rows: Sequence[Row], views: list[str]) -> list[tuple[str, str, bool
                      "(+: the video runs ahead of the actions; frozen: the video stands still, no lag)", True,
                      cast(Callable[[Row], str],
                           lambda r, v=view: median_lag_label((r.get("video_action") or {}).get(v)))))
+    cols += outcome_columns(rows)
     cols += [
         ("worst", "the worst chunk (largest time-aligned drift, else limit excess)", True,
          lambda r: _f((r.get("worst_chunk") or {}).get("chunk"), "d")),
@@ -232,6 +234,13 @@ _DEFINITIONS = [
     ("units", "the data's: arm joints in degrees, gripper 0..100."),
 ]
 
+
+_DEFINITIONS += [
+    ("success rate", "successes / rollouts with an outcome, per task and overall; the interval is the 95% Wilson "
+                     "score interval (Wilson 1927)."),
+    ("outcome", "success, progress [%], failure tag and source (label > file > sim/recording unless "
+                "--outcome-source names one)."),
+]
 
 _EPISODE_DEFINITIONS = [
     ("tracking error", "|action - state| per frame: the commanded (leader) arm against the measured (follower) "
@@ -362,7 +371,7 @@ def render_report_html(report: dict[str, Any], title: str | None = None,
     if rows:
         figures = "".join(figure_html(f) for f in report_figures(rows))
         body.append(
-            f"<h2>Summary</h2>{_summary(report)}{_errors(report)}"
+            f"<h2>Summary</h2>{_summary(report)}{_errors(report)}{success_section(report['aggregate'])}"
             f'<h2>Figures</h2><div class="figures">{figures}</div>'
             f"<h2>Rollouts</h2>{_table_tools(len(rows), 'filter', 'shown', 'filter rows (tag, prompt, kind ...)')}"
             f'<div class="table-wrap">{_table(rows, links)}</div>')

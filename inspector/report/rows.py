@@ -21,6 +21,7 @@ from ..analysis.video_metrics import VideoMetrics
 from ..data.session import RolloutKind
 from ..schema import Keys, Length
 from ..units import JOINT_NAMES
+from .outcomes import success_by_task, success_overall
 
 PerJoint = Annotated[list[float], Length(len(JOINT_NAMES))]  # JOINT_NAMES order
 
@@ -212,7 +213,8 @@ def _rounded(q: np.ndarray) -> list[float]:
 
 
 def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """mean / median / best / worst RMSE over the rows, and the mean PSNR of each view."""
+    """mean / median / best / worst RMSE over the rows, the mean PSNR of each view, and success
+    rates per task and overall (see :mod:`inspector.report.outcomes`)."""
     rmse = metrics.aggregate([r["rmse_deg"] for r in rows if r["rmse_deg"] is not None])
     by_view: dict[str, list[float]] = defaultdict(list)
     for r in rows:
@@ -226,26 +228,10 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "worst_rmse_deg": rmse["worst"],
         # per view: one average of front and wrist would hide which camera the model gets right
         "mean_video_psnr_db": {view: float(np.mean(v)) for view, v in sorted(by_view.items())},
-        **({"success_by_task": by_task} if (by_task := success_by_task(rows)) else {}),
+        # success rates with their Wilson intervals, over the rows' effective outcomes
+        **({"success_by_task": by_task, "success_overall": success_overall(by_task)}
+           if (by_task := success_by_task(rows)) else {}),
     }
-
-
-def success_by_task(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per task of a simulated evaluation (rows with an ``outcome``): episodes, successes, the
-    success rate and the mean summed reward, in the order the tasks first appear."""
-    tasks: dict[str, list[dict[str, Any]]] = defaultdict(list)
-    for r in rows:
-        outcome = r.get("outcome")
-        if isinstance(outcome, dict) and outcome.get("success") is not None:
-            tasks[str(outcome.get("task"))].append(outcome)
-    out = []
-    for task, outcomes in tasks.items():
-        rewards = [o["sum_reward"] for o in outcomes if o.get("sum_reward") is not None]
-        n_success = sum(bool(o["success"]) for o in outcomes)
-        out.append({"task": task, "episodes": len(outcomes), "successes": n_success,
-                    "success_rate": n_success / len(outcomes),
-                    "mean_sum_reward": float(np.mean(rewards)) if rewards else None})
-    return out
 
 
 def prompt_pairs(entries: Iterable[tuple[Any, tuple, str, str]]) -> list[tuple[Any, Any]]:
