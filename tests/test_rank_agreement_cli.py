@@ -112,6 +112,7 @@ def test_agreement_equals_scipy_and_simpler_on_known_rates(sides, tmp_path):
     assert c["imagined_success_real_success"] == sum(min(IMAGINED[k], REAL[k]) for k in keys)
     html = page.read_text()
     assert html.count('class="pt') >= len(keys) and "imagined = real" in html
+    assert f"Rollouts from the same start on both sides ({len(keys) * ROLLOUTS})" in html
 
 
 def test_agreement_by_progress_uses_mean_progress(sides):
@@ -172,9 +173,11 @@ def test_rank_from_votes_puts_the_preferred_session_first(tmp_path):
             i, j = rng.integers(0, 4, size=2)
             answer = rng.choice(["a", "a", "a", "tie", "b"])
             _vote(better, f"t0_r{i:02d}", worse, f"t0_r{j:02d}", str(answer))
-    run = _cli("rank", weak, strong, middle, "--json", "--bootstrap", "300")
+    run = _cli("rank", weak, strong, middle, "--json", "--bootstrap", "300", "--html", tmp_path / "rank.html")
     assert run.returncode == 0, run.stderr
     out = json.loads(run.stdout)
+    html = (tmp_path / "rank.html").read_text()
+    assert html.count('<circle class="pt c0" data-key=') == 3 and "Wins of row over column" in html
     assert out["method"] == "bradley_terry" and out["votes"] == 36
     assert [r["session"] for r in out["ranking"]] == ["strong", "middle", "weak"]
     matrix = np.array(out["win_matrix"]["votes"])
@@ -213,3 +216,9 @@ def test_rank_bad_votes_are_one_line_naming_the_file(tmp_path, capsys):
         assert code == 2 and err == f"error: {votes_path(a)}: {expected}\n"
     code, _, err = _main(capsys, "rank", a)
     assert code == 2 and "at least two sessions" in err
+
+
+def test_serve_ab_needs_two_sessions(tmp_path, capsys):
+    one = _write_session(tmp_path / "one", "x", {TASKS[0]: 1}, n=2)
+    code, _, err = _main(capsys, "serve", "--ab", "--port", "0", one)
+    assert code == 2 and err == "error: --ab: blind comparison needs two or more sessions with rollouts (got 1)\n"

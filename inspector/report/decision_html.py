@@ -76,6 +76,12 @@ def render_ranking_html(result: dict[str, Any]) -> str:
             for i, r in enumerate(result["ranking"], 1)]
     table = _table(["#", "session", "model", "strength" if bt else "success rate", "95% interval",
                     "votes" if bt else "successes"], rows)
+    if bt:
+        m = result["win_matrix"]
+        cells = [[name, *("—" if v == 0 else f"{w:g} of {v}" for w, v in zip(wins, votes))]
+                 for name, wins, votes in zip(m["sessions"], m["wins"], m["votes"])]
+        table += "<h2>Wins of row over column (ties as halves), of the votes between them</h2>"
+        table += _table(["", *m["sessions"]], cells)
     return _page("Checkpoint ranking", f"<p class=\"caption\">{escape(result['note'])}</p>{ranking_figure(result)}", table)
 
 
@@ -88,8 +94,16 @@ def render_agreement_html(result: dict[str, Any]) -> str:
                       f"{p['imagined_rollouts']}/{p['real_rollouts']}"] for p in result["points"]])
     caption = (f"<p class=\"caption\">{len(result['points'])} checkpoint-task points; "
                f"{result['confidence']:.0%} bootstrap intervals over rollouts.</p>")
+    c = result["confusion"]
+    confusion = ("" if not c["pairs"] else
+                 f"<h2>Rollouts from the same start on both sides ({c['pairs']})</h2>"
+                 + _table(["", "real success", "real failure"],
+                          [["imagined success", str(c["imagined_success_real_success"]),
+                            str(c["imagined_success_real_failure"])],
+                           ["imagined failure", str(c["imagined_failure_real_success"]),
+                            str(c["imagined_failure_real_failure"])]]))
     return _page("Imagined vs real", caption + agreement_figure(result),
-                 _table(["statistic", "value", "95% interval"], rows) + points)
+                 _table(["statistic", "value", "95% interval"], rows) + points + confusion)
 
 
 def _write(page: str, out: str | Path) -> Path:
