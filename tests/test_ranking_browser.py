@@ -72,6 +72,9 @@ def test_blind_votes_by_keys_rank_the_planted_worse_checkpoint_last(tmp_path, br
         page = open_page(browser, 1400, 900)
         page.goto(app.url)
         page.wait_for_selector("[data-ab-pair='1'] [data-ab-side='B'] video")
+        for side in ("A", "B"):  # each side's arm: six joint lines drawn
+            lines = page.locator(f"[data-ab-joints='{side}'] svg.chart path.ln")
+            assert lines.count() == 6 and lines.first.bounding_box()["width"] > 50
         html = page.content()
         assert not [s for s in SECRETS if s in html], "a name reached the page before the vote"
         for k in range(1, VOTES + 1):

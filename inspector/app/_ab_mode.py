@@ -24,12 +24,18 @@ from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from html import escape
+from importlib import resources
 from pathlib import Path
+
+import numpy as np
 
 from ..data.session import Rollout, Session
 from ..data.votes import Side, Vote, merged_votes, new_vote, save_vote
 from ..errors import InspectorError
+from ..report.svg import Axes, colour_class, legend_html
+from ..units import JOINT_NAMES
 from ._label_ids import LABEL_IDS_HTML
+from ._overview_table import scoped_css
 from ._page_script import page_script_html
 
 ANSWER_BUTTONS = {"a": "A better", "tie": "Tie", "b": "B better"}
@@ -50,6 +56,10 @@ document.documentElement.addEventListener('keydown', (e) => {
 });
 """
 AB_KEYS_HTML = page_script_html("ab_keys", _KEYS_JS)
+AB_SCOPE = "ab-pair"
+# the report's chart styles (lines coloured by class), scoped to the pair so they reach nothing else
+CHART_CSS = scoped_css((resources.files("inspector.report") / "assets" / "chart.css").read_text(encoding="utf-8"),
+                       AB_SCOPE)
 MAX_VIDEO_MB = 32.0  # a view larger than this is not inlined into the page
 
 
@@ -121,9 +131,28 @@ def video_uri(path: Path) -> str | None:
     return _video_uri(str(path), st.st_size, st.st_mtime_ns)
 
 
-def side_html(label: str, rollout: Rollout) -> str:
-    """One side of the pair: its imagined video and the real one where there is one; nothing that
-    names the session or the rollout."""
+def joint_ranges(*rollouts: Rollout) -> tuple[float, float]:
+    """One y range for the joint plots of both sides, so their motions compare at a glance."""
+    values = np.concatenate([r.executed_actions().ravel() for r in rollouts])
+    values = values[np.isfinite(values)]
+    return (float(values.min()), float(values.max())) if len(values) else (0.0, 1.0)
+
+
+def joints_html(rollout: Rollout, y_range: tuple[float, float]) -> str:
+    """The arm's predicted joints over the rollout's executed steps, one line per joint."""
+    actions = rollout.executed_actions()
+    t = np.arange(len(actions)) / rollout.fps
+    ax = Axes(x_label="time [s]", y_label=f"joint [{'deg' if rollout.units.arm == 'degrees' else '±100'}; gripper 0..100]", width=420, height=200,
+              y_min=y_range[0], y_max=y_range[1])
+    for j, name in enumerate(JOINT_NAMES):
+        ax.line(t, actions[:, j].tolist(), cls=colour_class(j), label=name)
+    rollout.release_arrays()
+    return ax.svg() + legend_html(ax.legend)
+
+
+def side_html(label: str, rollout: Rollout, y_range: tuple[float, float] | None = None) -> str:
+    """One side of the pair: its imagined video, the real one where there is one, and its arm's
+    predicted joints; nothing that names the session or the rollout."""
     cells = []
     for view in rollout.views[:1]:
         uri = video_uri(rollout.video_path(view))
@@ -132,6 +161,8 @@ def side_html(label: str, rollout: Rollout) -> str:
             cells.append(_video_cell(f"real · {view}", video_uri(rollout.video_path(view, gt=True)), "gt"))
     if not cells:
         cells.append("<div style='color:#6b7280'>no video</div>")
+    if y_range is not None:
+        cells.append(f"<div data-ab-joints='{label}'>{joints_html(rollout, y_range)}</div>")
     return (f"<div data-ab-side='{label}' style='flex:1;min-width:0'>"
             f"<div style='font-weight:700;font-size:1.1rem'>{label}</div>{''.join(cells)}</div>")
 
@@ -210,10 +241,15 @@ class ABTab:
             self.shown = (a, b)
             ra, rb = self.sessions[a[0]].rollouts[a[1]], self.sessions[b[0]].rollouts[b[1]]
             prompt = escape(ra.prompt or "(no prompt)")
+            try:
+                y_range: tuple[float, float] | None = joint_ranges(ra, rb)
+            except InspectorError:  # an array that cannot be read: the videos still compare
+                y_range = None
             self.pair_html.content = (
-                f"<div data-ab-pair='{len(self.votes_cast) + 1}' style='padding:0 0.2rem'>"
+                f"<div class='{AB_SCOPE}' data-ab-pair='{len(self.votes_cast) + 1}' style='padding:0 0.2rem'>"
                 f"<div style='font-size:0.85rem;margin-bottom:0.3rem'>task: {prompt}</div>"
-                f"<div style='display:flex;gap:0.5rem'>{side_html('A', ra)}{side_html('B', rb)}</div></div>")
+                f"<div style='display:flex;gap:0.5rem'>{side_html('A', ra, y_range)}{side_html('B', rb, y_range)}</div>"
+                f"<style>{CHART_CSS}</style></div>")
 
     def vote(self, answer: str, progress_a: float | None = None, progress_b: float | None = None,
              note: str | None = None) -> Vote | None:
