@@ -207,6 +207,7 @@ def _cmd_agreement(args: argparse.Namespace) -> int:
     from .report.agreement import build_agreement, format_agreement
 
     result = build_agreement(args.imagined, args.real, by=args.by, match=dict(args.match or []),
+                             imagined_source=args.imagined_source, real_source=args.real_source,
                              n_bootstrap=args.bootstrap, seed=args.seed)
     if args.html:
         from .report.decision_html import write_agreement_html
@@ -559,6 +560,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="compare success rates (default) or mean progress")
     p.add_argument("--match", type=_key_value("IMAGINED=REAL"), action="append", metavar="IMAGINED=REAL",
                    help="an imagined checkpoint's name as the real side calls it; repeat")
+    for side in ("imagined", "real"):
+        p.add_argument(f"--{side}-source", choices=("label", "file", "sim", "recording"), default=None,
+                       help=f"read only this outcome source on the {side} side (default: each rollout's "
+                            "effective outcome, label > file > sim > recording)")
     _decision_arguments(p)
     p.set_defaults(func=_cmd_agreement)
 

@@ -222,3 +222,26 @@ def test_serve_ab_needs_two_sessions(tmp_path, capsys):
     one = _write_session(tmp_path / "one", "x", {TASKS[0]: 1}, n=2)
     code, _, err = _main(capsys, "serve", "--ab", "--port", "0", one)
     assert code == 2 and err == "error: --ab: blind comparison needs two or more sessions with rollouts (got 1)\n"
+
+
+def test_one_session_can_be_both_sides_by_outcome_source(tmp_path):
+    """A simulated evaluation (its verdicts: ``sim``) whose imagined videos a judge also scored (an
+    outcomes ``file``): each side reads its own source."""
+    from inspector.report.agreement import build_agreement
+
+    sessions = []
+    for c in CHECKPOINTS:
+        dest = _write_session(tmp_path / c, c, {t: REAL[(c, t)] for t in TASKS}, judged_by="sim")
+        records = {f"t{t}_r{i:02d}": {"success": i < IMAGINED[(c, task)]} for t, task in enumerate(TASKS)
+                   for i in range(ROLLOUTS)}
+        store_records(dest / OUTCOMES_FILE, records, source="file", set_by="judge.jsonl")
+        sessions.append(dest)
+    out = build_agreement(sessions, sessions, imagined_source="file", real_source="sim", n_bootstrap=100)
+    keys = sorted(IMAGINED)
+    x = np.array([IMAGINED[k] / ROLLOUTS for k in keys])
+    y = np.array([REAL[k] / ROLLOUTS for k in keys])
+    assert out["statistics"]["pearson"]["value"] == pytest.approx(stats.pearsonr(x, y).statistic)
+    assert out["sources"] == {"imagined": "file", "real": "sim"}
+    # the effective outcome on both sides is the file's: perfect agreement
+    same = build_agreement(sessions, sessions, n_bootstrap=100)
+    assert same["statistics"]["pearson"]["value"] == pytest.approx(1.0)

@@ -25,7 +25,7 @@ By = Literal["success", "progress"]
 CONFIDENCE = 0.95
 
 
-def _values(sessions: Sequence[Session], by: By, rename: Mapping[str, str]) -> tuple[
+def _values(sessions: Sequence[Session], by: By, rename: Mapping[str, str], source: str | None) -> tuple[
         dict[tuple[str, str], list[float]], dict[tuple, list[bool]], int]:
     """``({(checkpoint, task): values}, {start: successes}, rollouts not judged)`` of one side."""
     cells: dict[tuple[str, str], list[float]] = defaultdict(list)
@@ -36,7 +36,7 @@ def _values(sessions: Sequence[Session], by: By, rename: Mapping[str, str]) -> t
         outcomes = session_outcomes(session)
         for tag in sorted(session.rollouts):
             rollout = session.rollouts[tag]
-            outcome = judged(outcomes, tag, rollout)
+            outcome = judged(outcomes, tag, rollout, source)
             value = outcome.progress if by == "progress" else outcome.success
             if value is None:
                 unjudged += 1
@@ -49,7 +49,8 @@ def _values(sessions: Sequence[Session], by: By, rename: Mapping[str, str]) -> t
 
 
 def build_agreement(imagined: Sequence[str | Path], real: Sequence[str | Path], *, by: By = "success",
-                    match: Mapping[str, str] | None = None, n_bootstrap: int = DEFAULT_BOOTSTRAP,
+                    match: Mapping[str, str] | None = None, imagined_source: str | None = None,
+                    real_source: str | None = None, n_bootstrap: int = DEFAULT_BOOTSTRAP,
                     seed: int = 0) -> dict[str, Any]:
     """The agreement of the imagined evaluations with the real ones (see ``docs/metrics.md``).
 
@@ -57,13 +58,17 @@ def build_agreement(imagined: Sequence[str | Path], real: Sequence[str | Path], 
         imagined, real: session directories of each side.
         by: ``success`` (rate of successes) or ``progress`` (mean progress, 0..1).
         match: imagined checkpoint name -> real checkpoint name, where they differ.
+        imagined_source, real_source: read only this outcome source on that side (``label``,
+            ``file``, ``sim``, ``recording``; None: each rollout's effective outcome), so that one
+            session can be both sides (a judge's file on its imagined video, its simulator's verdicts).
 
     Raises:
         InspectorError: a path is not a session; no checkpoint or no task in common; fewer than
             3 points judged on both sides.
     """
-    imagined_cells, imagined_starts, imagined_unjudged = _values(open_sessions(imagined, "--imagined"), by, match or {})
-    real_cells, real_starts, real_unjudged = _values(open_sessions(real, "--real"), by, {})
+    imagined_cells, imagined_starts, imagined_unjudged = _values(open_sessions(imagined, "--imagined"), by, match or {},
+                                                                 imagined_source)
+    real_cells, real_starts, real_unjudged = _values(open_sessions(real, "--real"), by, {}, real_source)
     _check_common(imagined_cells, real_cells, by)
     keys = sorted(set(imagined_cells) & set(real_cells))
     if len(keys) < MIN_POINTS:
@@ -75,6 +80,7 @@ def build_agreement(imagined: Sequence[str | Path], real: Sequence[str | Path], 
              for pair in zip(imagined_starts[start], real_starts[start])]
     return {
         "by": by, "confidence": CONFIDENCE, "bootstrap": n_bootstrap,
+        "sources": {"imagined": imagined_source or "effective", "real": real_source or "effective"},
         "points": [{"checkpoint": p.checkpoint, "task": p.task, "imagined": float(p.imagined.mean()),
                     "real": float(p.real.mean()), "imagined_rollouts": len(p.imagined), "real_rollouts": len(p.real)}
                    for p in points],

@@ -75,8 +75,9 @@ def session_outcomes(session: Session) -> SessionOutcomes:
     return outcomes
 
 
-def judged(outcomes: SessionOutcomes, tag: str, rollout: Rollout) -> Judged:
-    record = effective_outcome(outcomes.sources(tag, rollout))
+def judged(outcomes: SessionOutcomes, tag: str, rollout: Rollout, prefer: str | None = None) -> Judged:
+    """A rollout's effective outcome, or the ``prefer`` source's alone (``--outcome-source``)."""
+    record = effective_outcome(outcomes.sources(tag, rollout), prefer)
     if record is None:
         return Judged(None, None)
     progress = record.get("progress")
