@@ -931,6 +931,7 @@ def bench_rank(tmp: Path, quick: bool) -> list[Figure]:
     from inspector.analysis.ranking import rank_sessions, simulate_votes
     from inspector.data.session import SessionWriter
     from inspector.data.votes import Side, new_vote, save_vote
+    from inspector.outcomes import OUTCOMES_FILE, store_records
 
     true = np.array([1.5, 0.75, 0.0, -0.75, -1.5])
     rng = np.random.default_rng(0)
@@ -951,12 +952,32 @@ def bench_rank(tmp: Path, quick: bool) -> list[Figure]:
         answer = "a" if sc == 1.0 else "b" if sc == 0.0 else "tie"
         save_vote(new_vote(Side(str(roots[f]), f"s{f}", "r0"), Side(str(roots[s_]), f"s{s_}", "r0"), answer))
     ours = run_process(inspector_cmd("rank", *map(str, roots), "--json"))
+    sides = {}
+    for side in ("imagined", "real"):  # 8 checkpoints x 5 tasks x 20 rollouts per side, judged in a file
+        sides[side] = []
+        for c in range(8):
+            dest = tmp / f"agree_{side}_{c}"
+            records = {}
+            with SessionWriter.create(dest, model={"name": f"ckpt{c}"}) as w:
+                for task in range(5):
+                    for i in range(20):
+                        w.add_rollout(f"t{task}_{i:02d}", kind="single_chunk", actions=np.zeros((1, 9, 6)),
+                                      prompt=f"task {task}", episode_index=task, start_frame=i)
+                        records[f"t{task}_{i:02d}"] = {"success": bool(rng.random() < (c + 1) / 9)}
+            store_records(dest / OUTCOMES_FILE, records, source="file", set_by="bench")
+            sides[side].append(str(dest))
+    agree = run_process(inspector_cmd("agreement", "--imagined", *sides["imagined"], "--real", *sides["real"], "--json"))
     return [Figure("rank_interval_coverage", coverage, "fraction", "0.90 to 0.98 (nominal 0.95)",
                    0.90 <= coverage <= 0.98,
                    note=f"true strengths inside the 95% bootstrap intervals: 5 sessions (strengths -1.5 to 1.5), "
                         f"200 votes drawn from the Bradley-Terry model, {n_sims} simulations"),
             Figure("rank_200_votes", ours.wall_s, "s", "< 5 s and < 500 MB", ours.wall_s < 5 and ours.peak_mib < 500,
-                   ours.peak_mib, note="inspector rank on 5 sessions, 200 votes, 2000 bootstrap replicates")]
+                   ours.peak_mib, note="inspector rank on 5 sessions, 200 votes, 2000 bootstrap replicates"),
+            Figure("agreement_1600_rollouts", agree.wall_s, "s", "< 10 s and < 500 MB",
+                   agree.wall_s < 10 and agree.peak_mib < 500, agree.peak_mib,
+                   note="inspector agreement, 8 checkpoints x 5 tasks x 20 rollouts per side (40 points), "
+                        f"2000 bootstrap replicates; machine load average {os.getloadavg()[0]:.1f} on "
+                        f"{os.cpu_count()} CPUs")]
 
 
 # ----------------------------------------------------------------------------------------------

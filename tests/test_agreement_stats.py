@@ -148,3 +148,16 @@ def test_confusion_counts_each_pairing():
     table = confusion([(True, True), (True, False), (True, False), (False, False)])
     assert table == {"imagined_success_real_success": 1, "imagined_success_real_failure": 2,
                      "imagined_failure_real_success": 0, "imagined_failure_real_failure": 1}
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_statistics_equal_scipy_on_rates_with_many_ties(seed):
+    """Rates of a few rollouts tie often (k/4): the ranks' ties are where Spearman and tau-b differ
+    from their plain forms."""
+    rng = np.random.default_rng(seed)
+    x, y = rng.integers(0, 5, 15) / 4, rng.integers(0, 5, 15) / 4
+    got = point_statistics(x, y)
+    assert got["pearson"] == pytest.approx(stats.pearsonr(x, y).statistic, abs=1e-12)
+    assert got["spearman"] == pytest.approx(stats.spearmanr(x, y).statistic, abs=1e-12)
+    assert got["kendall"] == pytest.approx(stats.kendalltau(x, y).statistic, abs=1e-12)
+    assert got["mmrv"] == pytest.approx(mean_maximum_rank_violation_simpler(x, y), abs=1e-12)

@@ -4,9 +4,10 @@ One point per (checkpoint, task): its success rate (or mean progress) over the r
 the world model's imagination, and over those run on the robot or in a simulator. Across the
 points:
 
-- ``pearson``: Pearson's r of the rates (``scipy.stats.pearsonr``);
-- ``spearman``: Spearman's rho (``scipy.stats.spearmanr``, ties at mean ranks);
-- ``kendall``: Kendall's tau-b (``scipy.stats.kendalltau``);
+- ``pearson``: Pearson's r of the rates (as ``scipy.stats.pearsonr``);
+- ``spearman``: Spearman's rho (as ``scipy.stats.spearmanr``: Pearson's r of the ranks, ties at
+  their mean rank);
+- ``kendall``: Kendall's tau-b (as ``scipy.stats.kendalltau``);
 - ``mmrv``: the Mean Maximum Rank Violation of SIMPLER (Li et al. 2024, "Evaluating Real-World
   Robot Manipulation Policies in Simulation", simpler-env/SimplerEnv
   ``simpler_env/utils/metrics.py``): for each point i, the largest real-rate gap
@@ -19,6 +20,9 @@ Each comes with a bootstrap interval over rollouts: each point's rollouts are re
 replacement on each side (their number kept), the rates and statistics recomputed, and the
 percentiles taken over the replicates where the statistic is defined (a correlation is not where
 a side's rates are all equal).
+
+Everything is computed in numpy, batched over the replicates (scipy's import alone takes a
+second); the tests hold each statistic to scipy's.
 """
 
 from __future__ import annotations
@@ -28,7 +32,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy import stats
 
 DEFAULT_BOOTSTRAP = 2000
 MIN_POINTS = 3  # fewer points make no correlation
@@ -71,15 +74,7 @@ def point_statistics(imagined: npt.ArrayLike, real: npt.ArrayLike) -> dict[str, 
         raise ValueError(f"imagined and real rates differ in shape ({x.shape} and {y.shape})")
     if len(x) < MIN_POINTS:
         raise ValueError(f"{len(x)} checkpoint-task points; a correlation needs at least {MIN_POINTS}")
-    constant = bool(np.all(x == x[0]) or np.all(y == y[0]))
-    nan = float("nan")
-    return {
-        "pearson": nan if constant else float(stats.pearsonr(x, y).statistic),
-        "spearman": nan if constant else float(stats.spearmanr(x, y).statistic),
-        "kendall": nan if constant else float(stats.kendalltau(x, y).statistic),
-        "mmrv": float(mean_maximum_rank_violation(x, y)),
-        "mean_abs_difference": float(np.mean(np.abs(x - y))),
-    }
+    return {name: float(values[0]) for name, values in _batched_statistics(x[None], y[None]).items()}
 
 
 def _batched_statistics(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64]) -> dict[str, npt.NDArray[np.float64]]:
@@ -97,11 +92,20 @@ def _batched_statistics(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64]) 
     # tau-b = sum sx*sy / sqrt(sum sx^2 * sum sy^2) over the pairs (both triangles: the factor 2 cancels)
     return {
         "pearson": pearson(x, y),
-        "spearman": pearson(stats.rankdata(x, axis=1), stats.rankdata(y, axis=1)),
+        "spearman": pearson(mean_ranks(x), mean_ranks(y)),
         "kendall": _ratio((sx * sy).sum(axis=(1, 2)), np.sqrt((sx * sx).sum(axis=(1, 2)) * (sy * sy).sum(axis=(1, 2)))),
         "mmrv": mean_maximum_rank_violation(x, y),
         "mean_abs_difference": np.abs(x - y).mean(axis=1),
     }
+
+
+def mean_ranks(values: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """(B, n) -> the rank of each value within its row, 1-based, ties at their mean rank
+    (``scipy.stats.rankdata(method="average", axis=1)``)."""
+    # rank of v = 1 + (values below v) + (values equal to v, less one) / 2
+    below = (values[:, None, :] < values[:, :, None]).sum(axis=2)
+    equal = (values[:, None, :] == values[:, :, None]).sum(axis=2)
+    return 1.0 + below + (equal - 1) / 2.0
 
 
 def _ratio(num: npt.NDArray[np.float64], den: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:

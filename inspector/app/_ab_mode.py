@@ -2,8 +2,9 @@
 
 Each tab shows two rollouts of different sessions (checkpoints) from the same start (the same tag,
 or the same episode, start frame and prompt) side by side: their imagined video, the real one
-where the rollout carries it, and the arm's predicted joints over time (one scale for both sides). The sides are shuffled and nothing that names a session (its name,
-model, metrics, the rollout's tag) is sent to the page until the vote is cast: in this mode the
+where the rollout carries it, and the arm's predicted joints over time (one scale for both
+sides). The sides are shuffled and nothing that names a session (its name, model, metrics, the
+rollout's tag) is sent to the page until the vote is cast: in this mode the
 page holds no picker or overview at all. The evaluator answers A better, B better or tie (keys
 ``A``, ``B``, ``=``), optionally with a progress score [%] for each and a note; the vote is saved
 at once in both sessions' ``votes.json`` (:mod:`inspector.data.votes`), the names of the pair just
