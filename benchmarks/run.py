@@ -842,6 +842,150 @@ def bench_keys(tmp: Path, quick: bool) -> list[Figure]:
                         f"canvas hidden); baseline: 3D canvas hidden")]
 
 
+def _labelled_session(tmp: Path, name: str, n: int, labels: bool) -> Path:
+    """``n`` single-chunk rollouts with GT joints and no video (what labelling and the outcome
+    statistics cost, not decoding), with a label on each when ``labels``."""
+    from inspector import SessionWriter
+    from inspector.outcomes import store_records
+
+    rng = np.random.default_rng(0)
+    root = tmp / name
+    with SessionWriter.create(root, model={"name": name}, overwrite=True) as w:
+        for i in range(n):
+            actions = rng.normal(0, 5, size=(1, 24, 6))
+            w.add_rollout(f"r{i:04d}", kind="single_chunk", actions=actions, episode_index=i,
+                          gt_actions=actions[0] + rng.normal(0, 1, size=(24, 6)),
+                          prompt="Pick the red cube" if i % 2 else "Lift the red cube")
+    if labels:
+        store_records(root / "outcomes.json", {f"r{i:04d}": {"success": bool(rng.random() < 0.6),
+                                                             "progress": float(rng.integers(0, 11) * 10)}
+                                               for i in range(n)}, source="label", set_by="benchmark")
+    return root
+
+
+def bench_outcomes(tmp: Path, quick: bool) -> list[Figure]:
+    """``report`` of 1,000 labelled rollouts against the same rollouts unlabelled (one run, one
+    cache state); ``compare`` of two labelled sessions (the tests: bootstrap per metric, McNemar);
+    and the paired bootstrap's coverage of a known mean, by simulation."""
+    from inspector.stats import paired_bootstrap
+
+    n = 300 if quick else 1000
+    plain = _labelled_session(tmp, "plain", n, labels=False)
+    labelled = _labelled_session(tmp, "labelled", n, labels=True)
+    other = _labelled_session(tmp, "labelled_b", n, labels=True)
+    base = run_process(inspector_cmd("report", plain, "--json"), env=fresh_cache(tmp))
+    ours = run_process(inspector_cmd("report", labelled, "--json"), env=fresh_cache(tmp))
+    if len(json.loads(ours.stdout)["aggregate"]["success_by_task"]) != 2:
+        raise AssertionError("the labelled report has no success rates")
+    figures = [Figure(f"report_{n}_labelled", ours.wall_s, "s", "< 10 s and < 1 GB",
+                      ours.wall_s < 10 and ours.peak_mib < 1024, ours.peak_mib, base.wall_s, base.peak_mib,
+                      "single-chunk rollouts with GT joints, a label each; baseline: the same unlabelled")]
+    cmp = run_process(inspector_cmd("compare", labelled, other, "--json"), env=fresh_cache(tmp))
+    tests = json.loads(cmp.stdout)["tests"]
+    figures.append(Figure(f"compare_{n}_tests", cmp.wall_s, "s", "< 20 s and < 1 GB",
+                          cmp.wall_s < 20 and cmp.peak_mib < 1024, cmp.peak_mib,
+                          note=f"{len(tests)} tests ({', '.join(t['metric'] for t in tests)}), 10,000 bootstrap "
+                               "resamples each, from cold caches"))
+    rng = np.random.default_rng(1)
+    sims, pairs = (200, 30) if quick else (1000, 30)
+    covered = {"normal": 0, "exponential": 0}
+    t0 = time.perf_counter()
+    for k in range(sims):
+        for dist, (sample, mean) in {"normal": (rng.normal(0.5, 1.0, pairs), 0.5),
+                                     "exponential": (rng.exponential(1.0, pairs) - 0.5, 0.5)}.items():
+            lo, hi = paired_bootstrap(sample, seed=k).ci
+            covered[dist] += lo <= mean <= hi
+    per_ci_ms = (time.perf_counter() - t0) / (2 * sims) * 1e3
+    coverage = {d: 100 * c / sims for d, c in covered.items()}
+    figures.append(Figure("bootstrap_coverage", coverage["normal"], "%", "93-97 % (nominal 95 %)",
+                          93 <= coverage["normal"] <= 97,
+                          note=f"{sims} simulated evaluations of {pairs} pairs, N(0.5, 1): {coverage['normal']:.1f} %; "
+                               f"skewed (exponential): {coverage['exponential']:.1f} %; 10,000 resamples, "
+                               f"{per_ci_ms:.1f} ms per interval"))
+    return figures
+
+
+def bench_label(tmp: Path, quick: bool) -> list[Figure]:
+    """Labelling by keyboard in headless Chromium: S or F, a progress digit, then N to the next
+    unlabelled rollout. With the 3D canvas hidden (the page's own work: a GPU-less page draws
+    WebGL in software, ~150 ms a frame, and on a busy machine its key events wait behind that),
+    ``n`` rollouts: the median time from a key press to the label on disk, and the page time for all
+    of them; then a few rollouts with the canvas shown, the same median beside it."""
+    sys.path.insert(0, str(REPO / "tests"))
+    from browser import launch, skip_reason
+
+    if (reason := skip_reason()) is not None:
+        print(f"  label: skipped ({reason})", file=sys.stderr)
+        return []
+    from playwright.sync_api import sync_playwright
+
+    n = 15 if quick else 50
+    load = os.getloadavg()[0]
+    with sync_playwright() as pw:
+        browser = launch(pw)
+        hidden = _label_pass(browser, _labelled_session(tmp, "to_label", n, labels=False), n, hide_canvas=True)
+        shown = _label_pass(browser, _labelled_session(tmp, "to_label_3d", 4, labels=False), 4, hide_canvas=False)
+        browser.close()
+    (latencies, writes, page_s, labelled), (latencies_3d, _, _, _) = hidden, shown
+    median, median_3d = statistics.median(latencies), statistics.median(latencies_3d)
+    return [Figure("label_key", median, "ms", "median < 300 ms", median < 300, baseline=median_3d,
+                   note=f"headless Chromium, 3D canvas hidden: S/F or a digit to the label written in "
+                        f"outcomes.json, median of {len(latencies)} presses (worst {max(latencies):.0f} ms), the "
+                        f"server's locked write {statistics.median(writes):.0f} ms of it; baseline: the canvas "
+                        f"shown (software WebGL), {len(latencies_3d)} presses; load average {load:.1f}"),
+            Figure(f"label_{n}_rollouts", page_s, "s", "< 60 s", page_s < 60 and labelled == n,
+                   note=f"{n} single-chunk rollouts labelled by keyboard (S/F, a digit, N to the next), canvas "
+                        f"hidden, {labelled} labels on disk")]
+
+
+def _label_pass(browser, session: Path, n: int, hide_canvas: bool) -> tuple[list[float], list[float], float, int]:
+    """Label ``n`` rollouts of ``session`` by keyboard: (key-to-disk latencies [ms], the server's
+    write times [ms], page time [s], labels on disk)."""
+    from browser import open_app, page_client_id, wait_until
+
+    from inspector.app import serve
+
+    outcomes = session / "outcomes.json"
+
+    def on_disk(tag: str) -> dict:
+        try:
+            return json.loads(outcomes.read_text())["rollouts"][tag]["label"]
+        except (OSError, ValueError, KeyError):
+            return {}
+
+    app = serve([session], port=0, block=False)
+    latencies: list[float] = []
+    writes: list[float] = []
+    try:
+        page = browser.new_page(viewport={"width": 1600, "height": 1000})
+        open_app(page, app.url)
+        if hide_canvas:
+            page.add_style_tag(content="canvas{display:none !important}")
+        tab = wait_until(lambda: app.tabs.get(page_client_id(page)), what="the tab")
+        wait_until(lambda: tab.loaded is not None, timeout=120, what="the first rollout")
+        started = time.perf_counter()
+        for i in range(n):
+            tag = tab.loaded.entry.tag
+            for key, field, value in (("s" if i % 3 else "f", "success", i % 3 != 0),
+                                      (str(1 + i % 9), "progress", 10.0 * (1 + i % 9))):
+                t0 = time.perf_counter()
+                page.keyboard.press(key)
+                wait_until(lambda: on_disk(tag).get(field) == value, timeout=60, interval=0.002, what=f"{key} saved")
+                latencies.append((time.perf_counter() - t0) * 1e3)
+                if tab.label.last_saved is not None:
+                    writes.append(tab.label.last_saved[2] * 1e3)
+            if i < n - 1:
+                before = tab.key
+                page.keyboard.press("n")
+                wait_until(lambda: tab.key != before and tab.loaded is not None and tab.loaded.entry.key == tab.key,
+                           timeout=60, interval=0.005, what="N")
+        page_s = time.perf_counter() - started
+        page.close()
+    finally:
+        app.stop()
+    return latencies, writes, page_s, len(json.loads(outcomes.read_text())["rollouts"])
+
+
 @contextlib.contextmanager
 def _serve(args: Sequence[str], env: dict[str, str]) -> Iterator[tuple[subprocess.Popen, int]]:
     port = _free_port()
@@ -990,7 +1134,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--latest", action="store_true",
                         help="merge the figures into benchmarks/latest.json (by name) and rewrite the table in "
                              "benchmarks/README.md")
-    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback keys groot eval clock rank")
+    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback keys groot eval clock "
+                                           "outcomes label rank")
     args = parser.parse_args(argv)
 
     figures: list[Figure] = []
@@ -1011,6 +1156,8 @@ def main(argv: list[str] | None = None) -> int:
             ("eval", lambda: bench_eval(tmp, args.quick)),
             ("clock", lambda: bench_clock(tmp, args.quick)),
             ("rank", lambda: bench_rank(tmp, args.quick)),
+            ("outcomes", lambda: bench_outcomes(tmp, args.quick)),
+            ("label", lambda: bench_label(tmp, args.quick)),
         ]
         for name, run in runs:
             if args.only and name not in args.only:
