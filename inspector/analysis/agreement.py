@@ -17,9 +17,16 @@ points:
 - ``mean_abs_difference``: the mean of ``|imagined - real|`` over the points.
 
 Each comes with a bootstrap interval over rollouts: each point's rollouts are resampled with
-replacement on each side (their number kept), the rates and statistics recomputed, and the
-percentiles taken over the replicates where the statistic is defined (a correlation is not where
-a side's rates are all equal).
+replacement on each side (their number kept) and the statistic recomputed over the replicates
+where it is defined (a correlation is not where a side's rates are all equal). The interval is the
+basic bootstrap interval ``[2 t - q97.5, 2 t - q2.5]`` (Davison & Hinkley 1997, "Bootstrap Methods
+and their Application", eq. 5.6), cut to the statistic's range, not the plain percentiles: a rate
+carries its sampling noise, which pulls a correlation of rates towards 0 and pushes MMRV and the
+differences up, and a resampled rate carries it twice, so the replicates sit further off than the
+estimate does. The basic interval turns that shift back; on simulated evaluations (30 points, 20
+rollouts a side) it held the statistic of the true success probabilities 79-93% of the time where
+the percentiles held it 0-29% (``agreement_interval_coverage`` in the benchmarks). ``bias`` is the
+replicates' mean less the estimate: how far sampling noise alone moves the statistic.
 
 Everything is computed in numpy, batched over the replicates (scipy's import alone takes a
 second); the tests hold each statistic to scipy's.
@@ -36,6 +43,9 @@ import numpy.typing as npt
 DEFAULT_BOOTSTRAP = 2000
 MIN_POINTS = 3  # fewer points make no correlation
 STATISTICS = ("pearson", "spearman", "kendall", "mmrv", "mean_abs_difference")
+# where each statistic can lie (rates and progress fractions are in [0, 1])
+RANGES = {"pearson": (-1.0, 1.0), "spearman": (-1.0, 1.0), "kendall": (-1.0, 1.0), "mmrv": (0.0, 1.0),
+          "mean_abs_difference": (0.0, 1.0)}
 
 
 @dataclass(frozen=True)
@@ -123,9 +133,9 @@ def agreement(points: Sequence[Point], *, n_bootstrap: int = DEFAULT_BOOTSTRAP, 
     """Each statistic with its bootstrap interval over rollouts.
 
     Returns:
-        ``{name: {"value", "low", "high", "replicates"}}``; ``replicates`` counts the bootstrap
-        replicates where the statistic was defined; ``value``/``low``/``high`` are None where it
-        is not defined (a side whose rates are all equal).
+        ``{name: {"value", "low", "high", "bias", "replicates"}}``; ``replicates`` counts the
+        bootstrap replicates where the statistic was defined; ``value``/``low``/``high``/``bias``
+        are None where it is not defined (a side whose rates are all equal).
 
     Raises:
         ValueError: fewer than :data:`MIN_POINTS` points, or a point with no rollout on a side.
@@ -147,10 +157,14 @@ def agreement(points: Sequence[Point], *, n_bootstrap: int = DEFAULT_BOOTSTRAP, 
         defined = replicates[np.isfinite(replicates)]
         value = values[name]
         ok = np.isfinite(value) and len(defined) > 0
-        low, high = (np.percentile(defined, [tail, 100 - tail]) if ok else (None, None))
-        out[name] = {"value": float(value) if np.isfinite(value) else None,
-                     "low": None if low is None else float(low), "high": None if high is None else float(high),
-                     "replicates": int(len(defined))}
+        if ok:
+            q_low, q_high = np.percentile(defined, [tail, 100 - tail])
+            low, high = RANGES[name]
+            out[name] = {"value": float(value), "low": float(np.clip(2 * value - q_high, low, high)),
+                         "high": float(np.clip(2 * value - q_low, low, high)),
+                         "bias": float(defined.mean() - value), "replicates": int(len(defined))}
+        else:
+            out[name] = {"value": None, "low": None, "high": None, "bias": None, "replicates": int(len(defined))}
     return out
 
 
