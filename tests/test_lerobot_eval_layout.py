@@ -131,7 +131,7 @@ def test_report_rows_and_success_rate_per_task(evaluation):
     assert by_task["so101_sim_0"]["success_rate"] == 0.5 and by_task["so101_sim_1"]["success_rate"] == 1.0
     assert by_task["so101_sim_0"]["mean_sum_reward"] == pytest.approx(1.5)
     text = cli("report", "--no-cache", root).stdout
-    assert "so101_sim_0: 1/2 (50%)" in text and "Evaluated episodes" in text
+    assert "so101_sim_0: 1/2 (50%, 95% CI 9-91%)" in text and "Evaluated episodes" in text
 
 
 def test_overview_shows_success_and_filters_failed_episodes(evaluation, tmp_path):

@@ -18,6 +18,7 @@ from importlib import resources
 from typing import Any, cast
 
 from ..analysis.video_action import median_lag_label
+from ..outcomes import sim_record
 from ..report.compare import compare_reports
 from ..report.figures import report_figures
 from ..report.html import KIND_LABELS, figure_html
@@ -139,18 +140,23 @@ def _matches(row: OverviewRow, q: Query, notes: Mapping[str, Note]) -> bool:
         return False
     kind = KIND_FILTERS.get(q.kind)
     if kind == "failed":
-        if (notes.get(row.key, Note()).outcome or outcome_of(row) or {}).get("success") is not False:
+        if (effective_of(row, notes) or {}).get("success") is not False:
             return False
     elif kind is not None and _kind_of(row) != kind:
         return False
     if q.flagged_only and not notes.get(row.key, Note()).flag:
         return False
-    if q.outcome != ALL_OUTCOMES and not _outcome_matches(notes.get(row.key, Note()).outcome, q.outcome):
+    if q.outcome != ALL_OUTCOMES and not _outcome_matches(effective_of(row, notes), q.outcome):
         return False
     if q.violations_only and not (row.summary and row.summary["limit_violations"]["steps"] > 0):
         return False
     text = f"{row.prompt} {row.tag}".lower()
     return all(word in text for word in q.search.lower().split())
+
+
+def effective_of(row: OverviewRow, notes: Mapping[str, Note]) -> Mapping[str, Any] | None:
+    """The row's effective outcome: as read with its notes, else its simulated evaluation's verdict."""
+    return notes.get(row.key, Note()).outcome or sim_record(outcome_of(row))
 
 
 def outcome_filters(notes: Mapping[str, Note]) -> list[str]:
@@ -177,8 +183,7 @@ def sort_value(row: OverviewRow, sort: str, notes: Mapping[str, Note],
     if sort == "flag":
         return 1.0 if notes.get(row.key, Note()).flag else 0.0
     if sort in ("success", "progress"):
-        outcome = notes.get(row.key, Note()).outcome or {}
-        value = outcome.get(sort)
+        value = (effective_of(row, notes) or {}).get(sort)
         return None if value is None else float(value)
     if sort == DELTA_RMSE:
         pair = comparison.pair_of.get(row.key) if comparison is not None else None
@@ -287,7 +292,7 @@ def _success_cell(success: bool | None) -> str:
 
 
 def _columns(views: Sequence[str], notes: Mapping[str, Note], comparison: Comparison | None,
-             many_sessions: bool, outcomes: bool = False) -> list[_Column]:
+             many_sessions: bool, outcomes: bool = False, with_outcomes: bool = False) -> list[_Column]:
     def note_of(r: OverviewRow) -> Note:
         return notes.get(r.key, Note())
 
@@ -306,9 +311,9 @@ def _columns(views: Sequence[str], notes: Mapping[str, Note], comparison: Compar
                 False, "prompt"),
         _Column("episode", "GT episode @ start frame", episode, False),
     ]
-    if any(n.outcome for n in notes.values()):  # did the task succeed: label, file or simulation
+    if with_outcomes:  # did the task succeed: label, file or simulation
         def outcome(r: OverviewRow) -> Mapping[str, Any]:
-            return note_of(r).outcome or {}
+            return effective_of(r, notes) or {}
 
         cols += [_Column("success", "did the task succeed (the effective outcome)",
                          lambda r: _success_cell(outcome(r).get("success")), css="success"),
@@ -383,7 +388,8 @@ def table_html(rows: Sequence[OverviewRow], shown: Sequence[OverviewRow], notes:
     cell its column (``data-col``); the rollout open in the tab is marked."""
     views = views_of(rows)
     cols = _columns(views, notes, comparison, len({r.session for r in rows}) > 1,
-                    outcomes=any(outcome_of(r) is not None for r in rows))
+                    outcomes=any(outcome_of(r) is not None for r in rows),
+                    with_outcomes=any(effective_of(r, notes) is not None for r in rows))
     head = "".join(f"<th title='{escape(c.tip)}'{' class=num' if c.numeric else ''}>{escape(c.header)}</th>"
                    for c in cols)
     body = []
