@@ -190,10 +190,17 @@ def test_votes_are_kept_in_both_sessions_and_counted_once(tmp_path):
     a = _write_session(tmp_path / "a", "x", {TASKS[0]: 1}, n=2)
     b = _write_session(tmp_path / "b", "y", {TASKS[0]: 1}, n=2)
     _vote(a, "t0_r00", b, "t0_r01", "tie")
-    assert [v.answer for v in read_votes(a)] == [v.answer for v in read_votes(b)] == ["tie"]
+    save_vote(new_vote(Side(str(a.resolve()), "a", "t0_r01", progress=40.0), Side(str(b.resolve()), "b", "t0_r00"), "b"))
+    assert [v.answer for v in read_votes(a)] == [v.answer for v in read_votes(b)] == ["tie", "b"]
     from inspector.report.ranking import build_ranking
 
-    assert build_ranking([a, b], n_bootstrap=100)["votes"] == 1
+    c = _write_session(tmp_path / "c", "z", {TASKS[0]: 1}, n=2)
+    _vote(a, "t0_r00", c, "t0_r00", "a")  # with a session not ranked below: left out, counted
+    out = build_ranking([a, b], n_bootstrap=100)
+    assert out["votes"] == 2 and out["votes_elsewhere"] == 1
+    entry = {r["session"]: r for r in out["ranking"]}["a"]
+    assert (entry["progress_mean"], entry["progress_scores"], entry["wins"], entry["losses"], entry["ties"]) == \
+        (40.0, 1, 0.0, 1.0, 1)
 
 
 def test_rank_bad_votes_are_one_line_naming_the_file(tmp_path, capsys):

@@ -11,6 +11,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from ..analysis.ranking import DEFAULT_BOOTSTRAP, LOSS, TIE, WIN, rank_sessions
 from ..data.session import Session
 from ..data.votes import Vote, merged_votes, votes_path
@@ -35,12 +37,16 @@ def build_ranking(paths: Sequence[str | Path], *, n_bootstrap: int = DEFAULT_BOO
     index = {s.root.resolve(): i for i, s in enumerate(sessions)}
     votes = merged_votes([s.root for s in sessions])
     used: list[tuple[int, int, float]] = []
+    progress: dict[int, list[float]] = {i: [] for i in range(len(sessions))}  # scores given in votes [%]
     for vote in votes:
         ia, ib = index.get(Path(vote.a.session).resolve()), index.get(Path(vote.b.session).resolve())
         if ia is None or ib is None or ia == ib:
             continue  # a comparison with a session not ranked here
         _check_rollouts(vote, sessions[ia], sessions[ib])
         used.append((ia, ib, _SCORE[vote.answer]))
+        for i, side in ((ia, vote.a), (ib, vote.b)):
+            if side.progress is not None:
+                progress[i].append(side.progress)
     base = {"sessions": [{"session": label, "path": str(s.root), "model": model_label(s)}
                          for label, s in zip(labels, sessions)],
             "votes": len(used), "votes_elsewhere": len(votes) - len(used), "confidence": CONFIDENCE}
@@ -56,7 +62,9 @@ def build_ranking(paths: Sequence[str | Path], *, n_bootstrap: int = DEFAULT_BOO
         ranking.append({"session": labels[i], "model": model_label(sessions[i]), "strength": float(fit.strength[i]),
                         "low": float(fit.low[i]), "high": float(fit.high[i]), "votes": int(fit.votes[i].sum()),
                         "wins": float(wins[i].sum() - ties), "losses": float(wins[:, i].sum() - ties),
-                        "ties": int(2 * ties)})
+                        "ties": int(2 * ties),
+                        "progress_mean": float(np.mean(progress[i])) if progress[i] else None,
+                        "progress_scores": len(progress[i])})
     return {**base, "method": "bradley_terry",
             "note": "Bradley-Terry strengths (log odds, mean 0) from blind pairwise votes; ties count half a "
                     f"win to each side; {CONFIDENCE:.0%} bootstrap intervals over votes ({n_bootstrap} replicates)",
