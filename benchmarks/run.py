@@ -1109,6 +1109,80 @@ def bench_serve(tmp: Path, quick: bool) -> list[Figure]:
     return figures
 
 
+def bench_rank(tmp: Path, quick: bool) -> list[Figure]:
+    """Bradley-Terry intervals' coverage on simulated preferences, and ``inspector rank`` as a whole
+    process on 5 sessions with 200 votes in their votes.json."""
+    from inspector.analysis.ranking import rank_sessions, simulate_votes
+    from inspector.data.session import SessionWriter
+    from inspector.data.votes import Side, new_vote, save_vote
+    from inspector.outcomes import OUTCOMES_FILE, store_records
+
+    true = np.array([1.5, 0.75, 0.0, -0.75, -1.5])
+    rng = np.random.default_rng(0)
+    n_sims = 40 if quick else 400
+    covered = 0
+    for sim in range(n_sims):
+        # drawn from the model itself, which has no ties (a tie is a half win only in the fit)
+        fit = rank_sessions(5, *simulate_votes(true, 200, rng), n_bootstrap=1000, seed=sim)
+        covered += int(np.sum((fit.low <= true) & (true <= fit.high)))
+    coverage = covered / (5 * n_sims)
+    roots = []
+    for i in range(5):
+        with SessionWriter.create(tmp / f"rank_s{i}", model={"name": f"ckpt{i}"}) as w:
+            w.add_rollout("r0", kind="single_chunk", actions=np.zeros((1, 9, 6)))
+        roots.append((tmp / f"rank_s{i}").resolve())
+    first, second, score = simulate_votes(true, 200, rng, tie_probability=0.1)
+    for f, s_, sc in zip(first, second, score):
+        answer = "a" if sc == 1.0 else "b" if sc == 0.0 else "tie"
+        save_vote(new_vote(Side(str(roots[f]), f"s{f}", "r0"), Side(str(roots[s_]), f"s{s_}", "r0"), answer))
+    ours = run_process(inspector_cmd("rank", *map(str, roots), "--json"))
+    sides = {}
+    for side in ("imagined", "real"):  # 8 checkpoints x 5 tasks x 20 rollouts per side, judged in a file
+        sides[side] = []
+        for c in range(8):
+            dest = tmp / f"agree_{side}_{c}"
+            records = {}
+            with SessionWriter.create(dest, model={"name": f"ckpt{c}"}) as w:
+                for task in range(5):
+                    for i in range(20):
+                        w.add_rollout(f"t{task}_{i:02d}", kind="single_chunk", actions=np.zeros((1, 9, 6)),
+                                      prompt=f"task {task}", episode_index=task, start_frame=i)
+                        records[f"t{task}_{i:02d}"] = {"success": bool(rng.random() < (c + 1) / 9)}
+            store_records(dest / OUTCOMES_FILE, records, source="file", set_by="bench")
+            sides[side].append(str(dest))
+    from inspector.analysis.agreement import Point, agreement, point_statistics
+
+    p = rng.uniform(0.05, 0.95, 30)
+    q = np.clip(p + rng.normal(0, 0.12, 30), 0.02, 0.98)
+    truth = point_statistics(p, q)
+    n_evals = 40 if quick else 200
+    held = dict.fromkeys(truth, 0)
+    for e in range(n_evals):
+        points = [Point(str(i), "t", (rng.random(20) < p[i]).astype(float), (rng.random(20) < q[i]).astype(float))
+                  for i in range(30)]
+        out = agreement(points, n_bootstrap=1000, seed=e)
+        for name, value in truth.items():
+            held[name] += out[name]["low"] <= value <= out[name]["high"]
+    worst = min(held, key=held.__getitem__)
+    agree = run_process(inspector_cmd("agreement", "--imagined", *sides["imagined"], "--real", *sides["real"], "--json"))
+    return [Figure("rank_interval_coverage", coverage, "fraction", "0.90 to 0.98 (nominal 0.95)",
+                   0.90 <= coverage <= 0.98,
+                   note=f"true strengths inside the 95% bootstrap intervals: 5 sessions (strengths -1.5 to 1.5), "
+                        f"200 votes drawn from the Bradley-Terry model, {n_sims} simulations"),
+            Figure("rank_200_votes", ours.wall_s, "s", "< 5 s and < 500 MB", ours.wall_s < 5 and ours.peak_mib < 500,
+                   ours.peak_mib, note="inspector rank on 5 sessions, 200 votes, 2000 bootstrap replicates"),
+            Figure("agreement_interval_coverage", held[worst] / n_evals, "fraction", ">= 0.75 (nominal 0.95)",
+                   held[worst] / n_evals >= 0.75,
+                   note=f"the least of the five statistics ({worst}); each: "
+                        + ", ".join(f"{k} {v / n_evals:.2f}" for k, v in held.items())
+                        + f"; 30 points, 20 rollouts a side from known probabilities, {n_evals} evaluations"),
+            Figure("agreement_1600_rollouts", agree.wall_s, "s", "< 10 s and < 500 MB",
+                   agree.wall_s < 10 and agree.peak_mib < 500, agree.peak_mib,
+                   note="inspector agreement, 8 checkpoints x 5 tasks x 20 rollouts per side (40 points), "
+                        f"2000 bootstrap replicates; machine load average {os.getloadavg()[0]:.1f} on "
+                        f"{os.cpu_count()} CPUs")]
+
+
 # ----------------------------------------------------------------------------------------------
 
 
@@ -1120,7 +1194,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="merge the figures into benchmarks/latest.json (by name) and rewrite the table in "
                              "benchmarks/README.md")
     parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback keys groot served eval clock "
-                                           "outcomes label")
+                                           "outcomes label rank")
     args = parser.parse_args(argv)
 
     figures: list[Figure] = []
@@ -1141,6 +1215,7 @@ def main(argv: list[str] | None = None) -> int:
             ("served", lambda: bench_served(tmp, args.quick)),
             ("eval", lambda: bench_eval(tmp, args.quick)),
             ("clock", lambda: bench_clock(tmp, args.quick)),
+            ("rank", lambda: bench_rank(tmp, args.quick)),
             ("outcomes", lambda: bench_outcomes(tmp, args.quick)),
             ("label", lambda: bench_label(tmp, args.quick)),
         ]

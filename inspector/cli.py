@@ -1,4 +1,4 @@
-"""``inspector`` command line: import, info, report, compare, serve, export, eval, demo.
+"""``inspector`` command line: import, info, report, compare, serve, export, eval, rank, agreement, demo.
 
 Bad input ends with exit code 2 and one line ``error: <file>: <what is wrong>``, never a traceback.
 What counts as bad input, per command:
@@ -13,6 +13,10 @@ What counts as bad input, per command:
 - ``compare``: as ``report`` for each side, and exit 2 when no rollout of A pairs with one of B.
 - ``export``: writes every rollout it can; each broken one prints its own ``error:`` line, leaves no
   file, and makes the exit code 2.
+- ``rank``: exit 2 when a path is not a session, fewer than two are given, or a vote file is
+  malformed or names a rollout its session does not have.
+- ``agreement``: exit 2 when a path is not a session, the sides share no checkpoint or no task, or
+  fewer than 3 checkpoint-task points are judged on both sides.
 - ``serve``: exit 2 when no path can be served; a path that cannot be opened among others is its
   ``error:`` line on stderr and an error card in the app, and the others are served.
 - ``eval``: exit 2 at once when the run cannot start (dataset, server, handshake, cameras, output);
@@ -165,7 +169,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     check_listenable(args.host, args.port)
     serve(args.paths, host=args.host, port=args.port, share=args.share, dataset=args.dataset,
           cache_mb=args.cache_mb, use_cache=not args.no_cache, exit_when_stopped=True,
-          calibration=args.calibration)
+          calibration=args.calibration, ab=args.ab)
     return 0
 
 
@@ -196,6 +200,32 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     result = evaluate(plan)
     print(format_result(result))
     return 0 if result.ok else EXIT_BAD_INPUT
+
+
+def _cmd_rank(args: argparse.Namespace) -> int:
+    from .report.ranking import build_ranking, format_ranking
+
+    result = build_ranking(args.paths, n_bootstrap=args.bootstrap, seed=args.seed)
+    if args.html:
+        from .report.decision_html import write_ranking_html
+
+        print(f"wrote {write_ranking_html(result, args.html)}", file=sys.stderr)
+    _emit(json.dumps(result, indent=2) if args.json else format_ranking(result))
+    return 0
+
+
+def _cmd_agreement(args: argparse.Namespace) -> int:
+    from .report.agreement import build_agreement, format_agreement
+
+    result = build_agreement(args.imagined, args.real, by=args.by, match=dict(args.match or []),
+                             imagined_source=args.imagined_source, real_source=args.real_source,
+                             n_bootstrap=args.bootstrap, seed=args.seed)
+    if args.html:
+        from .report.decision_html import write_agreement_html
+
+        print(f"wrote {write_agreement_html(result, args.html)}", file=sys.stderr)
+    _emit(json.dumps(result, indent=2) if args.json else format_agreement(result))
+    return 0
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -302,6 +332,15 @@ def _limit_margin_argument(p: argparse.ArgumentParser) -> None:
     p.add_argument("--limit-margin", type=_margin, default=DEFAULT_LIMIT_MARGIN_DEG, metavar="DEG",
                    help="a joint counts as past its URDF limit only beyond this margin "
                         f"(default {DEFAULT_LIMIT_MARGIN_DEG:g} deg)")
+
+
+def _decision_arguments(p: argparse.ArgumentParser) -> None:
+    """What ``rank`` and ``agreement`` share: output forms and the bootstrap."""
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--html", metavar="OUT.html", help="also write one self-contained page with the figure")
+    p.add_argument("--bootstrap", type=_whole_number_at_least(100), default=2000, metavar="N",
+                   help="bootstrap replicates for the 95%% intervals (default 2000)")
+    p.add_argument("--seed", type=_index, default=0, help="the bootstrap's random seed (default 0)")
 
 
 def _calibration(text: str) -> str:
@@ -485,6 +524,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="memory for video frames sent to browsers, shared by all tabs "
                         f"(default {DEFAULT_FRAME_CACHE_MB})")
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the metrics cache")
+    p.add_argument("--ab", action="store_true",
+                   help="blind A/B comparison of two or more sessions (checkpoints): pairs from the same start, "
+                        "names hidden until the vote (keys A, B, =); votes go to each session's votes.json "
+                        "for inspector rank")
     _calibration_argument(p)
     p.set_defaults(func=_cmd_serve)
 
@@ -535,6 +578,28 @@ def build_parser() -> argparse.ArgumentParser:
                    help="refuse a reply (or handshake) larger than MB megabytes, unread: that sample fails "
                         "(default 128: 80 times DreamZero-SO101's reply with its predicted video)")
     p.set_defaults(func=_cmd_eval)
+
+    p = sub.add_parser("rank", help="rank sessions (checkpoints) from blind A/B votes (Bradley-Terry), "
+                                    "else by success rate")
+    p.add_argument("paths", nargs="+", metavar="PATH", help="session directories (two or more)")
+    _decision_arguments(p)
+    p.set_defaults(func=_cmd_rank)
+
+    p = sub.add_parser("agreement", help="does success judged in imagination rank checkpoints as real success does")
+    p.add_argument("--imagined", nargs="+", required=True, metavar="PATH",
+                   help="sessions whose outcomes were judged in the world model's imagination")
+    p.add_argument("--real", nargs="+", required=True, metavar="PATH",
+                   help="sessions of the same checkpoints and tasks on the robot or in a simulator")
+    p.add_argument("--by", choices=("success", "progress"), default="success",
+                   help="compare success rates (default) or mean progress")
+    p.add_argument("--match", type=_key_value("IMAGINED=REAL"), action="append", metavar="IMAGINED=REAL",
+                   help="an imagined checkpoint's name as the real side calls it; repeat")
+    for side in ("imagined", "real"):
+        p.add_argument(f"--{side}-source", choices=("label", "file", "sim", "recording"), default=None,
+                       help=f"read only this outcome source on the {side} side (default: each rollout's "
+                            "effective outcome, label > file > sim > recording)")
+    _decision_arguments(p)
+    p.set_defaults(func=_cmd_agreement)
 
     p = sub.add_parser("demo", help="rebuild the bundled demo session")
     p.add_argument("--rebuild", action="store_true")

@@ -16,6 +16,7 @@ from ..data.session import is_session
 from ..data.sources import BUNDLED_DEMO, Sources, open_sources
 from ..errors import InspectorError
 from ..robot.kinematics import kinematics
+from ._ab_mode import ABTab, served_sessions
 from ._catalog import Catalog
 from ._frames import FrameCache
 from ._overview_rows import OverviewRows
@@ -37,19 +38,25 @@ class InspectorApp:
         host, port: where to listen (port 0 picks a free port; a busy port moves up by one).
         cache_mb: the budget of the frame cache shared by every tab [MiB].
         metrics_cache: where video metrics are read and kept (default: the user's cache).
+        ab: blind A/B mode: every tab compares pairs of sessions' rollouts (see ``._ab_mode``)
+            instead of browsing them.
 
     Attributes:
         catalog: the served rollouts and their shared data.
         overview_rows: the overview's summary row of every served rollout.
         tabs: ``{client_id: TabState}`` of the connected tabs.
+        ab_tabs: ``{client_id: ABTab}`` of the connected tabs in A/B mode.
     """
 
     def __init__(self, sources: Sources, host: str = "127.0.0.1", port: int = 8080,
-                 cache_mb: float = DEFAULT_FRAME_CACHE_MB, metrics_cache: MetricsCache | None = None) -> None:
+                 cache_mb: float = DEFAULT_FRAME_CACHE_MB, metrics_cache: MetricsCache | None = None,
+                 ab: bool = False) -> None:
         import viser
 
         self.sources = sources
+        self.ab = ab
         self.tabs: dict[int, TabState] = {}
+        self.ab_tabs: dict[int, ABTab] = {}
         self._tabs_changed = threading.Condition()
         self._decoder = ThreadPoolExecutor(DECODE_WORKERS, thread_name_prefix="inspector-decode")
         # video-action frame matches, after a rollout's frames: one at a time, beside the decoders
@@ -86,6 +93,12 @@ class InspectorApp:
         return self._robot.result()
 
     def _connect(self, client) -> None:
+        if self.ab:
+            ab_tab = ABTab(served_sessions(self.sources.sessions), client)
+            with self._tabs_changed:
+                self.ab_tabs[client.client_id] = ab_tab
+                self._tabs_changed.notify_all()
+            return
         tab = TabState(self, client)
         with tab.lock:  # whoever finds the tab in ``tabs`` waits on its lock for the first open
             with self._tabs_changed:
@@ -98,9 +111,11 @@ class InspectorApp:
     def _disconnect(self, client) -> None:
         with self._tabs_changed:
             tab = self.tabs.pop(client.client_id, None)
+            ab_tab = self.ab_tabs.pop(client.client_id, None)
             self._tabs_changed.notify_all()
-        if tab is not None:
-            tab.close()
+        for closing in (tab, ab_tab):
+            if closing is not None:
+                closing.close()
 
     def wait_for_tabs(self, n: int = 1, timeout: float = 60.0) -> list[TabState]:
         """Wait until ``n`` tabs are connected (and have opened their first rollout)."""
@@ -121,6 +136,8 @@ class InspectorApp:
         """Close every tab, stop the server and drop temporary sessions."""
         for tab in list(self.tabs.values()):
             tab.close()
+        for ab_tab in list(self.ab_tabs.values()):
+            ab_tab.close()
         self.overview_rows.stop()
         self.server.stop()
         self._decoder.shutdown(wait=False, cancel_futures=True)
@@ -137,7 +154,7 @@ def _load_robot() -> SharedRobot:
 def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", port: int = 8080,
           share: bool = False, dataset: str | Path | None = None, block: bool = True,
           cache_mb: float = DEFAULT_FRAME_CACHE_MB, use_cache: bool = True,
-          exit_when_stopped: bool = False, calibration: str | None = None) -> InspectorApp:
+          exit_when_stopped: bool = False, calibration: str | None = None, ab: bool = False) -> InspectorApp:
     """Serve sessions in the browser (the bundled demo when ``paths`` is empty).
 
     Args:
@@ -155,12 +172,14 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
             that no one needs any more (a rollout's videos still decoding, meshes loading),
             many seconds on a busy machine.
         calibration: a GR00T-Dreams dump's calibration (``--calibration``; None: its default).
+        ab: blind A/B comparison of the sessions (``--ab``; see ``._ab_mode``).
 
     Returns:
         The :class:`InspectorApp` (``.port``, ``.url``, ``.stop()``, ``.tabs``).
 
     Raises:
-        InspectorError: no path given and the bundled demo is not built, or a path is unreadable.
+        InspectorError: no path given and the bundled demo is not built, or a path is unreadable;
+            with ``ab``, fewer than two sessions with rollouts.
     """
     paths = list(paths or [])
     if not paths:
@@ -172,9 +191,13 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
     # opened is an error card, and the others are served
     sources = open_sources(paths, dataset=dataset, confine=True, datasets=True, keep_going=True,
                            calibration=calibration)
+    if ab and len(served_sessions(sources.sessions)) < 2:
+        sources.close()
+        raise InspectorError("--ab", f"blind comparison needs two or more sessions with rollouts "
+                                     f"(got {len(served_sessions(sources.sessions))})")
     try:
         app = InspectorApp(sources, host=host, port=port, cache_mb=cache_mb,
-                           metrics_cache=MetricsCache(enabled=use_cache))
+                           metrics_cache=MetricsCache(enabled=use_cache), ab=ab)
     except BaseException:  # Ctrl-C while starting included: drop temporary sessions
         sources.close()
         raise

@@ -1,0 +1,305 @@
+"""Blind pairwise comparison of checkpoints (``inspector serve --ab``), as RoboArena ranks policies.
+
+Each tab shows two rollouts of different sessions (checkpoints) from the same start (the same tag,
+or the same episode, start frame and prompt) side by side: their imagined video, the real one
+where the rollout carries it, and the arm's predicted joints over time (one scale for both
+sides). The sides are shuffled and nothing that names a session (its name, model, metrics, the
+rollout's tag) is sent to the page until the vote is cast: in this mode the
+page holds no picker or overview at all. The evaluator answers A better, B better or tie (keys
+``A``, ``B``, ``=``), optionally with a progress score [%] for each and a note; the vote is saved
+at once in both sessions' ``votes.json`` (:mod:`inspector.data.votes`), the names of the pair just
+judged show, and the next pair comes. Pairs come least-compared first: the session pair with the
+fewest votes so far (read from disk, so several tabs and processes spread their votes together),
+then its least-voted rollout pair, ties broken at random.
+"""
+
+from __future__ import annotations
+
+import base64
+import functools
+import itertools
+import math
+import random
+import threading
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass
+from html import escape
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from ..data.session import Rollout, Session
+from ..data.votes import Side, Vote, merged_votes, new_vote, save_vote
+from ..errors import InspectorError
+from ..report.svg import Axes, colour_class, legend_html
+from ..units import JOINT_NAMES
+from ._label_ids import LABEL_IDS_HTML
+from ._overview_table import scoped_css
+from ._page_script import page_script_html
+
+ANSWER_BUTTONS = {"a": "A better", "tie": "Tie", "b": "B better"}
+# Keys -> the button they press (the page's script clicks it; viser's hotkeys know no "=").
+_KEYS_JS = r"""
+const BUTTONS = {a: 'A better', b: 'B better', '=': 'Tie'};
+document.documentElement.addEventListener('keydown', (e) => {
+  if (e.ctrlKey || e.metaKey || e.altKey) return;
+  const t = e.target;
+  if (t instanceof Element && t.closest('input, textarea, [contenteditable="true"]')) return;
+  const label = BUTTONS[e.key.toLowerCase()];
+  if (!label) return;
+  const button = [...document.querySelectorAll('button')].find((b) => b.textContent.trim() === label);
+  if (!button) return;
+  e.stopPropagation();  // not also viser's camera (A strafes)
+  e.preventDefault();
+  button.click();
+});
+"""
+AB_KEYS_HTML = page_script_html("ab_keys", _KEYS_JS)
+AB_SCOPE = "ab-pair"
+# the report's chart styles (lines coloured by class), scoped to the pair so they reach nothing else
+CHART_CSS = scoped_css((resources.files("inspector.report") / "assets" / "chart.css").read_text(encoding="utf-8"),
+                       AB_SCOPE)
+MAX_VIDEO_MB = 32.0  # a view larger than this is not inlined into the page
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """Two rollouts from the same start, of sessions ``i`` < ``j`` (indexes into the served sessions)."""
+
+    i: int
+    tag_i: str
+    j: int
+    tag_j: str
+
+
+def _start(rollout: Rollout) -> tuple:
+    return (rollout.episode_index, rollout.start_frame, rollout.prompt)
+
+
+def plan_candidates(sessions: Sequence[Session]) -> list[Candidate]:
+    """Every pair of rollouts that share a start, across every pair of sessions: the same tag, else
+    the same (episode, start frame, prompt), matched one to one in tag order."""
+    out: list[Candidate] = []
+    for i, j in itertools.combinations(range(len(sessions)), 2):
+        a, b = sessions[i].rollouts, sessions[j].rollouts
+        unmatched = [t for t in sorted(b) if t not in a]
+        for tag in sorted(a):
+            if tag in b:
+                out.append(Candidate(i, tag, j, tag))
+                continue
+            twin = next((t for t in unmatched if _start(b[t]) == _start(a[tag])), None)
+            if twin is not None:
+                unmatched.remove(twin)
+                out.append(Candidate(i, tag, j, twin))
+    return out
+
+
+def choose_pair(candidates: Sequence[Candidate], sessions: Sequence[Session], votes: Sequence[Vote],
+                rng: random.Random) -> tuple[Candidate, bool] | None:
+    """The least-compared candidate and whether to swap its sides (at random); None when there is none."""
+    if not candidates:
+        return None
+    roots = [str(s.root.resolve()) for s in sessions]
+    by_sessions: Counter[frozenset[str]] = Counter()
+    by_rollouts: Counter[frozenset[tuple[str, str]]] = Counter()
+    for v in votes:
+        a, b = str(Path(v.a.session).resolve()), str(Path(v.b.session).resolve())
+        by_sessions[frozenset((a, b))] += 1
+        by_rollouts[frozenset(((a, v.a.rollout), (b, v.b.rollout)))] += 1
+
+    def load(c: Candidate) -> tuple[int, int, float]:
+        return (by_sessions[frozenset((roots[c.i], roots[c.j]))],
+                by_rollouts[frozenset(((roots[c.i], c.tag_i), (roots[c.j], c.tag_j)))], rng.random())
+
+    return min(candidates, key=load), rng.random() < 0.5
+
+
+@functools.lru_cache(maxsize=64)
+def _video_uri(path: str, size: int, mtime_ns: int) -> str:
+    """A video file as a data URI (keyed by size and time too: a replaced file is read again)."""
+    return "data:video/mp4;base64," + base64.b64encode(Path(path).read_bytes()).decode("ascii")
+
+
+def video_uri(path: Path) -> str | None:
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    if st.st_size > MAX_VIDEO_MB * 2**20:
+        return None
+    return _video_uri(str(path), st.st_size, st.st_mtime_ns)
+
+
+def joint_ranges(*rollouts: Rollout) -> tuple[float, float]:
+    """One y range for the joint plots of both sides, so their motions compare at a glance."""
+    values = np.concatenate([r.executed_actions().ravel() for r in rollouts])
+    values = values[np.isfinite(values)]
+    return (float(values.min()), float(values.max())) if len(values) else (0.0, 1.0)
+
+
+def joints_html(rollout: Rollout, y_range: tuple[float, float]) -> str:
+    """The arm's predicted joints over the rollout's executed steps, one line per joint."""
+    actions = rollout.executed_actions()
+    t = np.arange(len(actions)) / rollout.fps
+    ax = Axes(x_label="time [s]", y_label=f"joint [{'deg' if rollout.units.arm == 'degrees' else '±100'}; gripper 0..100]", width=420, height=200,
+              y_min=y_range[0], y_max=y_range[1])
+    for j, name in enumerate(JOINT_NAMES):
+        ax.line(t, actions[:, j].tolist(), cls=colour_class(j), label=name)
+    rollout.release_arrays()
+    return ax.svg() + legend_html(ax.legend)
+
+
+def side_html(label: str, rollout: Rollout, y_range: tuple[float, float] | None = None) -> str:
+    """One side of the pair: its imagined video, the real one where there is one, and its arm's
+    predicted joints; nothing that names the session or the rollout."""
+    cells = []
+    for view in rollout.views[:1]:
+        uri = video_uri(rollout.video_path(view))
+        cells.append(_video_cell(f"imagined · {view}", uri, "imagined"))
+        if view in rollout.gt_views:
+            cells.append(_video_cell(f"real · {view}", video_uri(rollout.video_path(view, gt=True)), "gt"))
+    if not cells:
+        cells.append("<div style='color:#6b7280'>no video</div>")
+    if y_range is not None:
+        cells.append(f"<div data-ab-joints='{label}'>{joints_html(rollout, y_range)}</div>")
+    return (f"<div data-ab-side='{label}' style='flex:1;min-width:0'>"
+            f"<div style='font-weight:700;font-size:1.1rem'>{label}</div>{''.join(cells)}</div>")
+
+
+def _video_cell(caption: str, uri: str | None, role: str) -> str:
+    if uri is None:
+        return f"<div style='color:#6b7280'>{escape(caption)}: too large to show</div>"
+    return (f"<figure style='margin:0.2rem 0'><video data-ab-video='{role}' src='{uri}' autoplay loop muted "
+            f"playsinline style='width:100%'></video><figcaption style='font-size:0.75rem;color:#6b7280'>"
+            f"{escape(caption)}</figcaption></figure>")
+
+
+def parse_progress(text: str) -> float | None:
+    """A progress field's text -> percent, None when empty.
+
+    Raises:
+        ValueError: not a number from 0 to 100.
+    """
+    text = text.strip().rstrip("%").strip()
+    if not text:
+        return None
+    value = float(text)
+    if not (math.isfinite(value) and 0.0 <= value <= 100.0):
+        raise ValueError("progress is a number from 0 to 100 [%]")
+    return value
+
+
+class ABTab:
+    """One tab in A/B mode: the pair on show, the vote controls, the names of the last judged pair.
+
+    Attributes:
+        shown: the pair on show as ((session index, tag) of side A, of side B), or None.
+        votes_cast: the votes this tab saved.
+    """
+
+    def __init__(self, sessions: Sequence[Session], client, seed: int | None = None) -> None:
+        self.sessions = list(sessions)
+        self.client = client
+        self.lock = threading.RLock()
+        self.closed = threading.Event()
+        self.candidates = plan_candidates(self.sessions)
+        self.rng = random.Random(seed)
+        self.shown: tuple[tuple[int, str], tuple[int, str]] | None = None
+        self.votes_cast: list[Vote] = []
+        gui = client.gui
+        gui.configure_theme(control_width="large", show_share_button=False, brand_color=(230, 119, 0))
+        with client.atomic():
+            gui.add_html("<div style='font-weight:600;font-size:0.95rem;padding:0 0.2rem'>Blind A/B comparison"
+                         f"{AB_KEYS_HTML}{LABEL_IDS_HTML}</div>")
+            self.pair_html = gui.add_html("")
+            self.buttons = {answer: gui.add_button(label) for answer, label in ANSWER_BUTTONS.items()}
+            gui.add_html("<div style='font-size:0.7rem;color:#6b7280;padding:0 0.2rem'>keys: A · B · = (tie)</div>")
+            self.progress = {side: gui.add_text(f"progress {side.upper()} [%]", "", hint="optional, 0 to 100")
+                             for side in ("a", "b")}
+            self.note = gui.add_text("note", "")
+            self.message = gui.add_html("")
+            self.revealed = gui.add_html("")
+            gui.main_panel.dock_left()
+            gui.main_panel.set_width(900)
+        for answer, button in self.buttons.items():
+            button.on_click(lambda e, a=answer: self.vote(a) if e.client is not None else None)
+        self.show_next()
+
+    def show_next(self) -> None:
+        """Put the least-compared pair on show."""
+        with self.lock:
+            votes = merged_votes([s.root for s in self.sessions])
+            choice = choose_pair(self.candidates, self.sessions, votes, self.rng)
+            if choice is None:
+                self.shown = None
+                self.pair_html.content = ("<div style='color:#6b7280'>No two sessions share a start (the same tag, "
+                                          "or the same episode, start frame and prompt): nothing to compare.</div>")
+                return
+            c, swap = choice
+            a, b = ((c.j, c.tag_j), (c.i, c.tag_i)) if swap else ((c.i, c.tag_i), (c.j, c.tag_j))
+            self.shown = (a, b)
+            ra, rb = self.sessions[a[0]].rollouts[a[1]], self.sessions[b[0]].rollouts[b[1]]
+            prompt = escape(ra.prompt or "(no prompt)")
+            try:
+                y_range: tuple[float, float] | None = joint_ranges(ra, rb)
+            except InspectorError:  # an array that cannot be read: the videos still compare
+                y_range = None
+            self.pair_html.content = (
+                f"<div class='{AB_SCOPE}' data-ab-pair='{len(self.votes_cast) + 1}' style='padding:0 0.2rem'>"
+                f"<div style='font-size:0.85rem;margin-bottom:0.3rem'>task: {prompt}</div>"
+                f"<div style='display:flex;gap:0.5rem'>{side_html('A', ra, y_range)}{side_html('B', rb, y_range)}</div>"
+                f"<style>{CHART_CSS}</style></div>")
+
+    def vote(self, answer: str, progress_a: float | None = None, progress_b: float | None = None,
+             note: str | None = None) -> Vote | None:
+        """Save ``answer`` ("a", "b", "tie") on the pair on show, reveal it and show the next.
+
+        Progress and note default to the fields' contents (empty: none). Returns the saved vote,
+        or None when nothing is on show or a field is invalid (the page says which).
+        """
+        with self.lock:
+            if self.shown is None or self.closed.is_set():
+                return None
+            try:
+                pa = progress_a if progress_a is not None else parse_progress(self.progress["a"].value)
+                pb = progress_b if progress_b is not None else parse_progress(self.progress["b"].value)
+            except ValueError:
+                self.message.content = ("<div style='color:#c92a2a'>progress: a number from 0 to 100, or "
+                                        "empty</div>")
+                return None
+            (ia, ta), (ib, tb) = self.shown
+            sa, sb = self.sessions[ia], self.sessions[ib]
+            v = new_vote(Side(str(sa.root.resolve()), sa.name, ta, pa), Side(str(sb.root.resolve()), sb.name, tb, pb),
+                         answer, self.note.value if note is None else note)
+            try:
+                save_vote(v)
+            except (InspectorError, OSError) as exc:
+                self.message.content = f"<div style='color:#c92a2a'>not saved: {escape(str(exc))}</div>"
+                return None
+            self.votes_cast.append(v)
+            self.message.content = ""
+            for field in (*self.progress.values(), self.note):
+                field.value = ""
+            self.revealed.content = reveal_html(v, sa, sb)
+            self.show_next()
+            return v
+
+    def close(self) -> None:
+        self.closed.set()
+
+
+def reveal_html(v: Vote, a: Session, b: Session) -> str:
+    said = {"a": "A better", "b": "B better", "tie": "tie"}[v.answer]
+    def who(side: Side, s: Session) -> str:
+        model = s.model.get("name") or ""
+        return f"{escape(s.name)}{f' ({escape(str(model))})' if model else ''} · {escape(side.rollout)}"
+    return (f"<div data-ab-revealed='{escape(v.id)}' style='font-size:0.8rem;padding:0 0.2rem'>"
+            f"last pair ({said}): A was {who(v.a, a)}; B was {who(v.b, b)}</div>")
+
+
+def served_sessions(sessions: Sequence[Session]) -> list[Session]:
+    """The sessions A/B mode compares (those with at least one loaded rollout)."""
+    return [s for s in sessions if s.rollouts]
+
