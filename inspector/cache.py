@@ -58,7 +58,9 @@ _IMPORT_MODULES = ("data/importers/__init__.py", "data/importers/calibration.py"
                    "data/importers/groot_dreams.py", "data/importers/lerobot_eval.py", "data/session.py")
 _METRIC_MODULES = ("analysis/metrics.py", "analysis/sweep.py", "analysis/video_metrics.py", "analysis/timeline.py",
                    "analysis/video_action.py",
-                   "robot/kinematics.py", "units.py", "data/ground_truth.py", "report/rows.py", "data/video.py")
+                   "robot/kinematics.py", "units.py", "data/ground_truth.py", "report/rows.py", "data/video.py",
+                   "analysis/seams.py", "analysis/completion.py", "analysis/coherence.py",
+                   "analysis/video_break.py", "report/measures.py")
 
 
 def default_dir() -> Path:

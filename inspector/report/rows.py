@@ -21,6 +21,7 @@ from ..analysis.video_metrics import VideoMetrics
 from ..data.session import RolloutKind
 from ..schema import Keys, Length
 from ..units import JOINT_NAMES
+from .measures import CoherenceJson, CompletionJson, LatentsJson, SeamsJson, VideoBreakJson, aggregate_measures, sanity_measures
 
 PerJoint = Annotated[list[float], Length(len(JOINT_NAMES))]  # JOINT_NAMES order
 
@@ -93,6 +94,13 @@ class RolloutRow(TypedDict):
     gt_warning: str | None
     chunk_joints: ChunkJoints | None
     outcome: dict[str, Any] | None  # a simulated evaluation's verdict (lerobot-eval): success, rewards, task
+    # the sanity measures (report/measures.py)
+    seams: SeamsJson | None
+    completion: CompletionJson | None
+    joint_coherence: CoherenceJson | None
+    video_break: dict[str, int | None]
+    video_degradation: dict[str, VideoBreakJson]
+    latents: LatentsJson | None
 
 
 def _in_episode(tl: RolloutTimeline, series: np.ndarray) -> np.ndarray:
@@ -120,12 +128,14 @@ def limit_record(summary: metrics.LimitSummary, margin_deg: float) -> LimitRecor
             "margin_deg": float(margin_deg)}
 
 
-def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> dict[str, Any]:
+def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics],
+                    imagined_quality: Mapping[str, np.ndarray] | None = None) -> dict[str, Any]:
     """The JSON record of one rollout (fields needing GT joints are null without them).
 
     Args:
         tl: the rollout's timeline.
         video: its video metrics per view (views without GT frames may be left out).
+        imagined_quality: per-frame no-reference measures of views without GT video.
     """
     r = tl.rollout
     ce = tl.chunk_errors
@@ -141,6 +151,7 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> d
     psnr = {view: vm.mean_psnr_db for view, vm in sorted(video.items()) if vm.mean_psnr_db is not None}
     agreement, agreement_note = video_action_record(tl, video)
     worst, worst_by = tl.worst_chunk()
+    sanity = sanity_measures(tl, video, imagined_quality)
     episode_length = None
     if tl.gt.episode_length is not None:  # counted from the rollout's step 0: back to the episode's start
         episode_length = int(tl.gt.episode_length - tl.gt.offset + r.start_frame)
@@ -174,6 +185,12 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> d
         "chunk_joints": _chunk_joints(tl),
         # a simulated evaluation's verdict (success, rewards, task), as its importer kept it
         "outcome": r.extra.get("outcome"),
+        "seams": sanity["seams"],
+        "completion": sanity["completion"],
+        "joint_coherence": sanity["joint_coherence"],
+        "video_break": sanity["video_break"],
+        "video_degradation": sanity["video_degradation"],
+        "latents": sanity["latents"],
     }
     return cast(dict[str, Any], row)  # a plain dict from here on, as every other report record
 
@@ -227,6 +244,7 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
         # per view: one average of front and wrist would hide which camera the model gets right
         "mean_video_psnr_db": {view: float(np.mean(v)) for view, v in sorted(by_view.items())},
         **({"success_by_task": by_task} if (by_task := success_by_task(rows)) else {}),
+        "sanity_measures": aggregate_measures(rows),
     }
 
 
