@@ -73,7 +73,7 @@ def test_rows_are_computed_once_then_listed_from_the_cache(tmp_path, monkeypatch
     cache = MetricsCache(tmp_path / "cache")
     catalog = _catalog([session], cache)
     first = OverviewRows(catalog)
-    assert len(first) == 13 and all(r.pending or r.error for r in first.rows())  # listed before computing
+    assert len(first) == 17 and all(r.pending or r.error for r in first.rows())  # listed before computing
     first.start()
     assert first.done.wait(ROWS_TIMEOUT_S)
     rows = {r.tag: r for r in first.rows()}
@@ -266,10 +266,10 @@ def test_compare_with_a_session_shows_the_planted_winners_and_drift_figures(brow
     info = page.locator(".inspector-overview .ov-compare").first
     info.wait_for(state="visible")
     text = info.inner_text()
-    assert "13 pair(s) (13 by tag" in text
-    # B predicts 3 deg off on two rollouts: A wins those, the other eleven tie
-    assert "A better in 2, B better in 0, ties 11" in text
-    keys = _wait_keys(page, lambda ks: len(ks) == 13, "B's rows set aside")
+    assert "17 pair(s) (17 by tag" in text
+    # B predicts 3 deg off on two rollouts: A wins those, the other fifteen tie
+    assert "A better in 2, B better in 0, ties 15" in text
+    keys = _wait_keys(page, lambda ks: len(ks) == 17, "B's rows set aside")
     assert all(k.startswith("demo / ") for k in keys)
     for tag in OFFSET_TAGS:
         delta = page.locator(f"tr[data-key='demo / {tag}'] td[data-col='delta']").inner_text()

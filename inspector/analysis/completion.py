@@ -24,7 +24,7 @@ COMPLETION_HOLD_S = 0.5
 # "away" from the target: farther than this fraction of the GT's own largest distance from it
 AWAY_FRACTION = 0.5
 # completion this much earlier than the GT's own (as a fraction of the GT's time) reads "early"
-EARLY_FRACTION = 0.15
+EARLY_FRACTION = 0.1
 
 
 def completion_step(dist: npt.ArrayLike, ee_mm: npt.ArrayLike | None, tol_deg: float, tol_mm: float,

@@ -15,7 +15,7 @@ prompt_train/novel      same start; novel veers for 2 chunks, then the same path
 video_ahead_1s          prompt_train's joints; its imagined video 1 s (30 frames) ahead of them
 single_fNNN             single chunks along an episode, error growing with the horizon
 seam_jump               shoulder_pan jumps 20 deg where chunk 12 takes over from chunk 11
-early_wander            the path at 1.3x speed, holds at the final pose, then wanders
+early_wander            twice as fast from 10 s, holds at the final pose, wanders from 12.5 s
 phase_lag_wrist         wrist_flex 10 steps (0.33 s) behind the GT; the other joints in phase
 video_degrades          noise growing in the imagined video from chunk 12 on
 ======================  ==============================================================
@@ -142,7 +142,9 @@ def _write_video_ahead(writer: SessionWriter, spec: _Spec, chunks: npt.NDArray[n
 # The sanity measures' faults (seams, completion, joint coherence, video break)
 
 SEAM_CHUNK, SEAM_JUMP_DEG = 12, 20.0  # seam_jump: shoulder_pan +20 deg from chunk 12 on
-EARLY_TEMPO, WANDER_FROM_S, WANDER_DEG = 1.3, 12.5, 30.0  # early_wander
+# early_wander: real speed until 10 s, then twice as fast to the end of the path, held there,
+# wandering from 12.5 s
+HURRY_FROM_S, HURRY_TEMPO, WANDER_FROM_S, WANDER_DEG = 10.0, 2.0, 12.5, 30.0
 PHASE_LAG_STEPS = 10  # phase_lag_wrist: wrist_flex this many steps behind
 DEGRADE_FROM_CHUNK = 12  # video_degrades: noise from this chunk on, growing
 SANITY_SEED = SEED + 1  # its own draws: the older rollouts' stay as they were
@@ -213,13 +215,15 @@ def write_sanity_rollouts(writer: SessionWriter, gt: npt.NDArray[np.float64],
 
     n_early = len(gt) // EXECUTED
     steps_e = np.arange(n_early * EXECUTED + HORIZON, dtype=np.float64)
-    path_time = np.minimum(EARLY_TEMPO * steps_e, end_time)
+    hurry = HURRY_FROM_S * FPS
+    path_time = np.minimum(np.where(steps_e < hurry, steps_e, hurry + HURRY_TEMPO * (steps_e - hurry)), end_time)
 
     def wander(full: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         t = steps_e / FPS - WANDER_FROM_S
         full[:, j["shoulder_pan"]] += WANDER_DEG * np.sin(np.pi * np.clip(t / 1.5, 0, 1)) * (t > 0)
         return full
-    add("early_wander", f"the path at {EARLY_TEMPO:g}x speed, held at its end, wandering from {WANDER_FROM_S:g} s",
+    add("early_wander", f"the path {HURRY_TEMPO:g}x as fast from {HURRY_FROM_S:g} s, held at its end, "
+                        f"wandering from {WANDER_FROM_S:g} s",
         chunked(path_time, n_early, wander), shown(path_time[: n_early * EXECUTED]))
 
 
