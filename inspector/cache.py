@@ -60,7 +60,7 @@ _METRIC_MODULES = ("analysis/metrics.py", "analysis/sweep.py", "analysis/video_m
                    "analysis/video_action.py",
                    "robot/kinematics.py", "units.py", "data/ground_truth.py", "report/rows.py", "data/video.py",
                    "analysis/seams.py", "analysis/completion.py", "analysis/coherence.py",
-                   "analysis/video_break.py", "report/measures.py")
+                   "analysis/video_break.py", "analysis/sanity.py")
 
 
 def default_dir() -> Path:

@@ -78,7 +78,7 @@ def test_rows_are_computed_once_then_listed_from_the_cache(tmp_path, monkeypatch
     assert first.done.wait(ROWS_TIMEOUT_S)
     rows = {r.tag: r for r in first.rows()}
     assert "actions.npy" in rows["bias_elbow"].error  # one bad rollout: its error row, the rest computed
-    assert first.n_computed == 12 and first.n_cached == 0
+    assert first.n_computed == 16 and first.n_cached == 0
     assert rows["tempo_0.8x"].summary["tempo"] == pytest.approx(0.8, abs=0.05)
 
     # A second app on the same cache lists every row without computing any.
@@ -91,7 +91,7 @@ def test_rows_are_computed_once_then_listed_from_the_cache(tmp_path, monkeypatch
     second = OverviewRows(_catalog([session], cache))
     second.start()
     assert second.done.wait(120)
-    assert second.n_cached == 12 and second.n_computed == 0
+    assert second.n_cached == 16 and second.n_computed == 0
     again = {r.tag: r for r in second.rows()}
     assert all(again[t].cached for t in rows if t != "bias_elbow")
     assert again["limits_wrist"].summary == rows["limits_wrist"].summary

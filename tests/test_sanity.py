@@ -5,6 +5,7 @@ they were planted, and the real DreamZero-SO101 outputs' figures."""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -22,6 +23,7 @@ from inspector.data.session import SessionWriter, open_session
 from inspector.data.video import VideoClip, encode_h264
 from inspector.demo.generate import DEGRADE_FROM_CHUNK, PHASE_LAG_STEPS, SANITY_TAGS, SEAM_CHUNK, SEAM_JUMP_DEG
 from inspector.report.build import format_report
+from inspector.report.html import render_report_html
 from inspector.report.sanity import load_thresholds, sanity_tests
 from inspector.units import Units
 
@@ -339,3 +341,39 @@ def test_real_outputs_sanity_figures(dreamzero_dir, tmp_path):
     assert "chunk 0 0.21 deg, never collapse" in sanity["multi-task disambiguation"]["figure"]
     assert sanity["autoregressive rollout"]["figure"].startswith("not measurable: no GT joints")
     assert report["sanity_headline"] == "sanity 0/5 (1 partial, 2 fail, 2 not measurable)"
+
+
+def test_demo_html_page_has_the_verdict_the_measures_and_the_break_curves(demo_report):
+    page = render_report_html(demo_report)
+    section = page[page.index("<h2>Sanity</h2>"):page.index("<h2>Definitions</h2>")]
+    verdicts = re.findall(r'<tr class="verdict-[^"]+"><td class=t>([^<]+)</td><td class=t><b>([^<]+)</b>', section)
+    assert verdicts == [(t["test"], t["verdict"]) for t in demo_report["sanity"]]
+    assert "sanity 1/5 (3 partial, 1 not measurable)" in section
+    measures = section[section.index('id="sanity-measures"'):]
+    seam_row = re.search(r"<tr><td class=t>seam_jump</td><td class=t>([^<]+)</td>", measures)
+    assert seam_row is not None and seam_row.group(1) == str(SEAM_CHUNK)
+    assert 'id="video-break"' in section and "video_degrades front: break chunk 12" in section
+    assert 'id="latents"' not in section  # the demo has no latents
+
+
+def test_recording_carries_seams_completion_and_video_break(tmp_path):
+    from test_export import Recording, rrd_verify
+
+    from inspector.export.layout import CHUNK, MARKERS
+
+    for tag in ("seam_jump", "video_degrades"):
+        out = _cli("export", DEMO, "--rollout", tag, "-o", tmp_path / f"{tag}.rrd", "--no-cache")
+        assert out.returncode == 0, out.stderr
+        rrd_verify(tmp_path / f"{tag}.rrd")
+    seam = Recording(tmp_path / "seam_jump.rrd")
+    chunks, _ = seam.scalars(f"{MARKERS}/seam_flagged", order_by=CHUNK)
+    assert chunks.tolist() == [SEAM_CHUNK]
+    at, jumps = seam.scalars("plots/seams/jump", order_by=CHUNK)
+    assert at.tolist() == list(range(1, 25)) and int(np.argmax(jumps)) + 1 == SEAM_CHUNK
+    assert not seam.has(f"{MARKERS}/video_break/front") and not seam.has(f"{MARKERS}/completion")
+    video = Recording(tmp_path / "video_degrades.rrd")
+    for view in ("front", "wrist"):
+        chunks, _ = video.scalars(f"{MARKERS}/video_break/{view}", order_by=CHUNK)
+        assert chunks.tolist() == [DEGRADE_FROM_CHUNK]
+        _, curve = video.scalars(f"plots/video_degradation/{view}", order_by=CHUNK)
+        assert len(curve) == 18 and curve[DEGRADE_FROM_CHUNK:].min() > 2

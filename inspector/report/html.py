@@ -33,6 +33,7 @@ from ..errors import InspectorError
 from ..units import JOINT_NAMES
 from .episode_figures import episode_figures, episode_key, episode_summary_numbers
 from .figures import Figure, report_figures
+from .sanity_html import sanity_section
 from .svg import legend_html
 
 Row = dict[str, Any]
@@ -365,7 +366,8 @@ def render_report_html(report: dict[str, Any], title: str | None = None,
             f"<h2>Summary</h2>{_summary(report)}{_errors(report)}"
             f'<h2>Figures</h2><div class="figures">{figures}</div>'
             f"<h2>Rollouts</h2>{_table_tools(len(rows), 'filter', 'shown', 'filter rows (tag, prompt, kind ...)')}"
-            f'<div class="table-wrap">{_table(rows, links)}</div>')
+            f'<div class="table-wrap">{_table(rows, links)}</div>'
+            + sanity_section(report, figure_html))
     if episodes:
         figures = "".join(figure_html(f) for f in episode_figures(episodes))
         body.append(

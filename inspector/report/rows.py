@@ -15,13 +15,13 @@ from typing import Annotated, Any, TypedDict, cast
 import numpy as np
 
 from ..analysis import metrics
+from ..analysis.sanity import CoherenceJson, CompletionJson, LatentsJson, SeamsJson, VideoBreakJson, aggregate_measures, sanity_measures
 from ..analysis.timeline import RolloutTimeline
 from ..analysis.video_action import ViewAgreementJson
 from ..analysis.video_metrics import VideoMetrics
 from ..data.session import RolloutKind
 from ..schema import Keys, Length
 from ..units import JOINT_NAMES
-from .measures import CoherenceJson, CompletionJson, LatentsJson, SeamsJson, VideoBreakJson, aggregate_measures, sanity_measures
 
 PerJoint = Annotated[list[float], Length(len(JOINT_NAMES))]  # JOINT_NAMES order
 
@@ -94,7 +94,7 @@ class RolloutRow(TypedDict):
     gt_warning: str | None
     chunk_joints: ChunkJoints | None
     outcome: dict[str, Any] | None  # a simulated evaluation's verdict (lerobot-eval): success, rewards, task
-    # the sanity measures (report/measures.py)
+    # the sanity measures (analysis/sanity.py)
     seams: SeamsJson | None
     completion: CompletionJson | None
     joint_coherence: CoherenceJson | None

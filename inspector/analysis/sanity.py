@@ -2,7 +2,7 @@
 joint coherence, where the imagined video breaks, and whether it has latents.
 
 Each is defined in its own module under :mod:`inspector.analysis` (and in docs/metrics.md); this
-one only feeds them a timeline and shapes their records.
+one only feeds them a timeline and shapes their records (for report rows, the app and recordings).
 """
 
 from __future__ import annotations
@@ -13,14 +13,14 @@ from typing import Any, TypedDict
 import numpy as np
 import numpy.typing as npt
 
-from ..analysis.coherence import CoherenceJson, coherence_record
-from ..analysis.completion import CompletionJson, completion_record
-from ..analysis.seams import SeamsJson, jerk_p95, seam_jumps, seams_record
-from ..analysis.timeline import RolloutTimeline
-from ..analysis.video_break import VideoBreakJson, video_break_record
-from ..analysis.video_metrics import VideoMetrics
 from ..data.session import CHAINED_KINDS
 from ..robot.kinematics import kinematics
+from .coherence import CoherenceJson, coherence_record
+from .completion import CompletionJson, completion_record
+from .seams import SeamsJson, jerk_p95, seam_jumps, seams_record
+from .timeline import RolloutTimeline
+from .video_break import VideoBreakJson, video_break_record
+from .video_metrics import VideoMetrics
 
 
 class LatentsJson(TypedDict):
