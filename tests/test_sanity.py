@@ -110,6 +110,24 @@ def test_phase_offset_finds_a_known_lag_and_coupling_error_is_the_relative_angle
     assert record["out_of_phase"] == ["wrist_flex"]
 
 
+def test_phase_offset_is_the_lag_of_the_best_pearson_correlation():
+    """Every lag scored by scipy's Pearson correlation, the best kept (the smallest lag on a tie)."""
+    from scipy.stats import pearsonr
+
+    rng = np.random.default_rng(5)
+    for _ in range(40):
+        n = int(rng.integers(12, 300))
+        gt = np.cumsum(rng.normal(size=n)) * 3
+        pred = np.roll(gt, int(rng.integers(-15, 15))) + rng.normal(size=n) * rng.uniform(0, 3)
+        vp, vg = np.diff(pred), np.diff(gt)
+        max_lag = min(30, len(vg) // 3)
+        scores = {lag: pearsonr(vp[lag:] if lag >= 0 else vp[:lag], vg[:len(vg) - lag] if lag >= 0 else vg[-lag:])[0]
+                  for lag in range(-max_lag, max_lag + 1)}
+        best = max(scores.values())
+        expected = min((lag for lag, r in scores.items() if r >= best - 1e-12), key=lambda v: (abs(v), v))
+        assert phase_offset(pred, gt, max_lag=30) == expected
+
+
 def _silhouette_by_definition(x: np.ndarray, labels: list[int]) -> float:
     """Rousseeuw's definition, point by point, on scipy's distances."""
     d = squareform(pdist(x))

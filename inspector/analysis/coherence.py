@@ -28,22 +28,35 @@ PHASE_FLAG_STEPS = 6  # |offset| above this many steps (0.2 s at 30 fps) is repo
 
 
 def phase_offset(pred: npt.ArrayLike, gt: npt.ArrayLike, max_lag: int) -> int | None:
-    """Best lag [steps] of one joint's (T,) predicted series against its GT (see the module)."""
+    """Best lag [steps] of one joint's (T,) predicted series against its GT (see the module).
+
+    Every lag at once: the cross products from one ``np.correlate``, the windows' sums and
+    squares from cumulative sums (a lag loop of ``np.corrcoef`` cost 60 ms a rollout). Among
+    equally good lags the smallest (in magnitude) wins.
+    """
     vp = np.diff(np.asarray(pred, np.float64))
     vg = np.diff(np.asarray(gt, np.float64))
-    if len(vg) < 4 or vg.std() < MIN_MOTION:
+    n = len(vg)
+    if n < 4 or vg.std() < MIN_MOTION:
         return None
-    max_lag = max(0, min(max_lag, len(vg) // 3))
-    best, best_r = None, -np.inf
-    for lag in range(-max_lag, max_lag + 1):
-        a = vp[lag:] if lag >= 0 else vp[:lag]
-        b = vg[:len(vg) - lag] if lag >= 0 else vg[-lag:]
-        if a.std() == 0 or b.std() == 0:
-            continue
-        r = float(np.corrcoef(a, b)[0, 1])
-        if r > best_r + 1e-12 or (abs(r - best_r) <= 1e-12 and best is not None and abs(lag) < abs(best)):
-            best, best_r = lag, r
-    return best
+    max_lag = max(0, min(max_lag, n // 3))
+    lags = np.array(sorted(range(-max_lag, max_lag + 1), key=lambda v: (abs(v), v)))
+    cross = np.correlate(vp, vg, mode="full")[lags + n - 1]  # sum_t vp[t] vg[t - lag]
+    cp, cp2 = np.r_[0.0, np.cumsum(vp)], np.r_[0.0, np.cumsum(vp * vp)]
+    cg, cg2 = np.r_[0.0, np.cumsum(vg)], np.r_[0.0, np.cumsum(vg * vg)]
+    pos = lags >= 0
+    # lag >= 0 pairs vp[lag:] with vg[:n - lag]; lag < 0 pairs vp[:n + lag] with vg[-lag:]
+    p_lo, p_hi = np.where(pos, lags, 0), np.where(pos, n, n + lags)
+    g_lo, g_hi = np.where(pos, 0, -lags), np.where(pos, n - lags, n)
+    m = (p_hi - p_lo).astype(np.float64)
+    sp, sp2 = cp[p_hi] - cp[p_lo], cp2[p_hi] - cp2[p_lo]
+    sg, sg2 = cg[g_hi] - cg[g_lo], cg2[g_hi] - cg2[g_lo]
+    var_p, var_g = sp2 - sp * sp / m, sg2 - sg * sg / m
+    ok = (var_p > 1e-12 * np.maximum(sp2, 1.0)) & (var_g > 1e-12 * np.maximum(sg2, 1.0))
+    if not ok.any():
+        return None
+    r = np.where(ok, (cross - sp * sg / m) / np.sqrt(np.where(ok, var_p * var_g, 1.0)), -np.inf)
+    return int(lags[int(np.argmax(r))])
 
 
 def coupling_error(pred: npt.ArrayLike, gt: npt.ArrayLike, a: int, b: int) -> float:
