@@ -25,6 +25,7 @@ HOTKEYS = {
     "Previous chunk": "pageup",
     "Next chunk": "pagedown",
     "Worst chunk": "W",
+    "Next flagged seam": "X",  # the chunk seams flagged as jumps (docs/metrics.md), in turn
 }
 # Letters viser's keyboard camera moves by.
 CAMERA_LETTERS = frozenset("WASDQE")

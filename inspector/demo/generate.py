@@ -204,7 +204,7 @@ def write_sanity_rollouts(writer: SessionWriter, gt: npt.NDArray[np.float64],
     noisy = {}
     for camera, f in frames.items():
         chunk = np.arange(len(f)) // EXECUTED
-        sigma = np.where(chunk >= DEGRADE_FROM_CHUNK, 20.0 + 4.0 * (chunk - DEGRADE_FROM_CHUNK), 0.0)
+        sigma = np.where(chunk >= DEGRADE_FROM_CHUNK, 26.0 + 4.0 * (chunk - DEGRADE_FROM_CHUNK), 0.0)
         # grain of 2x2 pixels: as plain to the eye and to the measure, and cheaper to store
         grain = rng.normal(size=(len(f), -(-f.shape[1] // 2), -(-f.shape[2] // 2), 3)).astype(np.float32)
         grain = grain.repeat(2, axis=1).repeat(2, axis=2)[:, : f.shape[1], : f.shape[2]]
