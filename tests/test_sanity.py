@@ -348,7 +348,7 @@ def test_real_outputs_sanity_figures(dreamzero_dir, tmp_path):
         assert set(rows[tag]["video_break"]) == {"front", "top", "gripper"}
     # the no-reference curve sees the front view lose its sharpness long before the episode's end
     # (chunk 36): the imagined camera closes in on the cube
-    assert rows["ep000_train"]["video_break"]["front"] == 7 and rows["ep000_novel"]["video_break"]["front"] == 6
+    assert rows["ep000_train"]["video_break"]["front"] == 9 and rows["ep000_novel"]["video_break"]["front"] == 8
     assert rows["ep000_train"]["video_break"]["gripper"] is None
     assert rows["f084"]["joint_coherence"]["coupling_error_deg"] == pytest.approx(
         {"shoulder_lift-elbow_flex": 2.9636, "elbow_flex-wrist_flex": 4.125}, abs=1e-3)

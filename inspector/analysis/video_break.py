@@ -118,9 +118,11 @@ class FrameQuality:
 def clip_quality(clip) -> Array:
     """(F, 3) the measures of every frame of a :class:`inspector.data.video.VideoClip`."""
     fq = FrameQuality()
+    n = 0
     for index, rgb in clip.iter_frames():
         fq.add(index, rgb)
-    return fq.array()
+        n = index + 1
+    return fq.array(n)
 
 
 class VideoBreakJson(TypedDict):
