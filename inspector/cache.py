@@ -60,7 +60,9 @@ _IMPORT_MODULES = ("data/importers/__init__.py", "data/importers/calibration.py"
 _METRIC_MODULES = ("analysis/metrics.py", "analysis/sweep.py", "analysis/video_metrics.py", "analysis/timeline.py",
                    "analysis/video_action.py",
                    "robot/kinematics.py", "units.py", "data/ground_truth.py", "report/rows.py", "data/video.py",
-                   "report/tasks.py")  # tasks.py: which rollouts get SSIM
+                   "report/tasks.py",  # tasks.py: which rollouts get SSIM
+                   "analysis/seams.py", "analysis/completion.py", "analysis/coherence.py",
+                   "analysis/video_break.py", "analysis/sanity.py")
 
 
 def default_dir() -> Path:

@@ -132,9 +132,18 @@ def _stdout_file() -> str:
 def _cmd_report(args: argparse.Namespace) -> int:
     from .report.build import build_report, format_report
 
+    thresholds = None
+    if args.sanity or args.sanity_config:
+        from .report.sanity import load_thresholds
+
+        thresholds = load_thresholds(args.sanity_config)  # a bad file fails before any work
     report = build_report(args.paths, dataset=args.dataset, jobs=args.jobs, use_cache=not args.no_cache,
                           limit_margin_deg=args.limit_margin, ray=args.ray, calibration=args.calibration,
                           outcome_source=args.outcome_source)
+    if thresholds is not None:
+        from .report.sanity import add_sanity
+
+        add_sanity(report, thresholds)
     if args.html:
         from .report.html import write_report_html
 
@@ -486,6 +495,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="neither read nor write the metrics cache ($INSPECTOR_CACHE_DIR, else ~/.cache/inspector)")
     p.add_argument("--html", metavar="OUT.html",
                    help="also write one self-contained page (tables, figures; opens offline)")
+    p.add_argument("--sanity", action="store_true",
+                   help="add the verdict of the five sanity tests (chunk fidelity, latent stability, joint "
+                        "coherence, multi-task disambiguation, autoregressive rollout)")
+    p.add_argument("--sanity-config", metavar="FILE.json",
+                   help="thresholds of the sanity tests over the defaults (implies --sanity; see docs/report.md)")
     _ray_argument(p, "compute the rollouts")
     _limit_margin_argument(p)
     _calibration_argument(p)

@@ -23,6 +23,7 @@ from browser import wait_until
 
 from inspector.app import HeadlessClient, TabState, serve
 from inspector.app._annotations import read_annotations, update_annotation
+from inspector.app._cards import headline_metrics
 from inspector.app._frames import READY
 from inspector.app._playback_clip import CLIP_STEPS
 from inspector.app._state import ARMS_AFTER_FRAME_S
@@ -38,7 +39,8 @@ LIMITS = "limits_wrist"  # wrist_flex driven past its limit
 SINGLE, OTHER_SINGLE = "single_f076", "single_f153"  # single chunks
 BROKEN = "single_f000"  # broken copy: truncated actions.npy
 CARRIED_GT = "single_f230"  # carries its own GT videos; broken copy: a truncated GT front video
-ROLLOUTS = (LONG, TRAIN, NOVEL, LIMITS, SINGLE, OTHER_SINGLE, BROKEN, CARRIED_GT)
+SEAM = "seam_jump"  # shoulder_pan jumps 20 deg where chunk 12 takes over
+ROLLOUTS = (LONG, TRAIN, NOVEL, LIMITS, SINGLE, OTHER_SINGLE, BROKEN, CARRIED_GT, SEAM)
 VIEWS = ("front", "wrist")
 
 
@@ -148,6 +150,20 @@ def test_worst_chunk_and_limits(app):
         tab.set_step(bad)
         texts = tab._limit_text(bad)
         assert any(texts) and all(("limit" in t) == v for t, v in zip(texts, tl.limit_violation[bad]))
+
+
+def test_seam_key_cycles_through_flagged_seams_and_the_card_lists_the_measures(app):
+    client, tab = connect(app)
+    with client:
+        assert tab.open(key(app, SEAM))
+        tl = tab.loaded.timeline
+        assert tab.jump_to_next_seam() == 12 * tl.steps_per_chunk  # the planted seam, the only one flagged
+        assert tab.jump_to_next_seam() == 12 * tl.steps_per_chunk  # wraps round to it
+        rows = dict(headline_metrics(tl))
+        assert rows["chunk seams flagged"].startswith("12 · worst 20.")
+        assert rows["completion"].startswith("never")
+        assert tab.open(key(app, LIMITS))
+        assert tab.jump_to_next_seam() == tab.step  # none flagged: stays
 
 
 def test_a_light_3d_page_gets_a_steps_frames_before_its_arms(app):

@@ -125,8 +125,8 @@ def comparison(worse_copy) -> dict:
 
 def test_compare_finds_the_worsened_rollouts(comparison):
     s = comparison["summary"]
-    assert s["n_pairs"] == s["n_compared"] == 12
-    assert (s["a_better"], s["b_better"], s["ties"]) == (len(WORSENED), 0, 12 - len(WORSENED))
+    assert s["n_pairs"] == s["n_compared"] == 16
+    assert (s["a_better"], s["b_better"], s["ties"]) == (len(WORSENED), 0, 16 - len(WORSENED))
     pairs = {p["a"]["tag"]: p for p in comparison["pairs"]}
     for tag, p in pairs.items():
         if tag in WORSENED:
@@ -139,7 +139,7 @@ def test_compare_finds_the_worsened_rollouts(comparison):
     assert s["wilcoxon_p"] == pytest.approx(stats.wilcoxon([d for d in deltas if d]).pvalue)
     assert s["spearman_rmse"] > 0.5
     drift = comparison["time_aligned_drift"]
-    assert (drift["n_compared"], drift["a_better"], drift["b_better"]) == (12, len(WORSENED), 0)
+    assert (drift["n_compared"], drift["a_better"], drift["b_better"]) == (16, len(WORSENED), 0)
 
 
 def test_compare_delta_of_a_single_chunk_is_the_offset_s_effect(comparison):
@@ -163,8 +163,8 @@ def test_compare_text_is_a_short_table(worse_copy):
     lines = out.stdout.splitlines()
     assert any(line.startswith("bias_elbow") and line.rstrip().endswith("A") for line in lines)
     assert any(line.startswith(f"{RENAMED[0]} ~ {RENAMED[1]}") for line in lines)
-    assert any(line.startswith("RMSE over 12 pair(s): A better 3, B better 0, ties 9") for line in lines)
-    assert any(line.startswith("Time-aligned drift over 12 pair(s)") for line in lines)
+    assert any(line.startswith("RMSE over 16 pair(s): A better 3, B better 0, ties 13") for line in lines)
+    assert any(line.startswith("Time-aligned drift over 16 pair(s)") for line in lines)
     assert f"Unpaired in A: {REMOVED}" in out.stdout
 
 

@@ -77,12 +77,12 @@ def test_rows_are_computed_once_then_listed_from_the_cache(tmp_path, monkeypatch
     cache = MetricsCache(tmp_path / "cache")
     catalog = _catalog([session], cache)
     first = OverviewRows(catalog)
-    assert len(first) == 13 and all(r.pending or r.error for r in first.rows())  # listed before computing
+    assert len(first) == 17 and all(r.pending or r.error for r in first.rows())  # listed before computing
     first.start()
     assert first.done.wait(ROWS_TIMEOUT_S)
     rows = {r.tag: r for r in first.rows()}
     assert "actions.npy" in rows["bias_elbow"].error  # one bad rollout: its error row, the rest computed
-    assert first.n_computed == 12 and first.n_cached == 0
+    assert first.n_computed == 16 and first.n_cached == 0
     assert rows["tempo_0.8x"].summary["tempo"] == pytest.approx(0.8, abs=0.05)
 
     # A second app on the same cache lists every row without computing any.
@@ -95,7 +95,7 @@ def test_rows_are_computed_once_then_listed_from_the_cache(tmp_path, monkeypatch
     second = OverviewRows(_catalog([session], cache))
     second.start()
     assert second.done.wait(120)
-    assert second.n_cached == 12 and second.n_computed == 0
+    assert second.n_cached == 16 and second.n_computed == 0
     again = {r.tag: r for r in second.rows()}
     assert all(again[t].cached for t in rows if t != "bias_elbow")
     assert again["limits_wrist"].summary == rows["limits_wrist"].summary
@@ -286,10 +286,10 @@ def test_compare_with_a_session_shows_the_planted_winners_and_drift_figures(brow
     info = page.locator(".inspector-overview .ov-compare").first
     info.wait_for(state="visible")
     text = info.inner_text()
-    assert "13 pair(s) (13 by tag" in text
-    # B predicts 3 deg off on two rollouts: A wins those, the other eleven tie
-    assert "A better in 2, B better in 0, ties 11" in text
-    keys = _wait_keys(page, lambda ks: len(ks) == 13, "B's rows set aside")
+    assert "17 pair(s) (17 by tag" in text
+    # B predicts 3 deg off on two rollouts: A wins those, the other fifteen tie
+    assert "A better in 2, B better in 0, ties 15" in text
+    keys = _wait_keys(page, lambda ks: len(ks) == 17, "B's rows set aside")
     assert all(k.startswith("demo / ") for k in keys)
     for tag in OFFSET_TAGS:
         delta = page.locator(f"tr[data-key='demo / {tag}'] td[data-col='delta']").inner_text()

@@ -91,7 +91,7 @@ def test_report_json_on_ray_is_the_local_report(tmp_path):
     assert "inspector: Ray at local, 2 CPU(s)" in on_ray.stderr
     assert json.loads(on_ray.stdout) == json.loads(local.stdout)
     report = json.loads(on_ray.stdout)
-    assert len(report["rollouts"]) == 13 and report["prompt_divergence"]  # every demo rollout, the prompt pair
+    assert len(report["rollouts"]) == 17 and report["prompt_divergence"]  # every demo rollout, the prompt pair
     assert not wait_gone(ray_processes() - before), "Ray processes outlived the command"
 
 

@@ -287,7 +287,7 @@ def demo_page(tmp_path_factory) -> Path:
 
 def test_report_html_is_self_contained_and_links_exported_rrd(demo_page):
     page = demo_page.read_text()
-    assert page.count('<tr data-key="') == 13
+    assert page.count('<tr data-key="') == 17
     assert re.findall(r'<a href="([^"]+)"', page) == ["bias_elbow.rrd"]
     # nothing that a browser would fetch: no external src/href/url(), no @import
     assert not re.search(r'(src|href)\s*=\s*"(?!bias_elbow\.rrd)', page)
@@ -369,7 +369,7 @@ def test_report_opens_offline_in_chromium(demo_page, tmp_path, browser):
 
         # the table: one row per rollout, sortable, filterable
         rows = page.locator("#rollouts tbody tr")
-        assert rows.count() == 13
+        assert rows.count() == 17
         headers = page.locator("#rollouts thead th")
         names = [h.strip() for h in headers.all_inner_texts()]
         col = names.index("RMSE")

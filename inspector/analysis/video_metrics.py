@@ -24,6 +24,7 @@ from ..data.video import ForwardReader, VideoClip, probe
 from ..errors import InspectorError
 from . import metrics
 from .video_action import FrameMatch, FrameMatchJson, Thumbnails, match_frames
+from .video_break import FrameQuality
 
 Array = npt.NDArray[np.float64]
 Frame = npt.NDArray[np.uint8]
@@ -36,6 +37,7 @@ class VideoMetricsRecord(TypedDict):
     psnr_db: list[float | None]
     ssim: list[float | None] | None
     match: FrameMatchJson | None
+    quality: list[list[float | None]] | None
 
 
 @dataclass
@@ -46,12 +48,15 @@ class VideoMetrics:
         psnr_db: (F,) per imagined frame; NaN where no GT frame exists (past the episode).
         ssim: (F,) likewise, or None when not asked for (it costs ~10x the PSNR).
         match: the GT frame each imagined frame resembles most, or None without a GT clip.
+        quality: (F, 3) no-reference sharpness, noise and flicker of each imagined frame
+            (:mod:`inspector.analysis.video_break`), or None when not measured.
     """
 
     view: str
     psnr_db: Array
     ssim: Array | None = None
     match: FrameMatch | None = None
+    quality: Array | None = None
 
     @property
     def mean_psnr_db(self) -> float | None:
@@ -61,13 +66,15 @@ class VideoMetrics:
     def to_json(self) -> VideoMetricsRecord:
         return {"view": self.view, "psnr_db": _floats(self.psnr_db),
                 "ssim": None if self.ssim is None else _floats(self.ssim),
-                "match": None if self.match is None else self.match.to_json()}
+                "match": None if self.match is None else self.match.to_json(),
+                "quality": None if self.quality is None else [_floats(row) for row in self.quality]}
 
     @classmethod
     def from_json(cls, data: VideoMetricsRecord) -> VideoMetrics:
-        ssim, match = data.get("ssim"), data.get("match")
+        ssim, match, quality = data.get("ssim"), data.get("match"), data.get("quality")
         return cls(data["view"], _array(data["psnr_db"]), None if ssim is None else _array(ssim),
-                   None if match is None else FrameMatch.from_json(match))
+                   None if match is None else FrameMatch.from_json(match),
+                   None if quality is None else np.array([_array(row) for row in quality]).reshape(-1, 3))
 
 
 def _floats(a: Array) -> list[float | None]:
@@ -104,6 +111,7 @@ def compare_clips(view: str, imagined: Sequence[VideoClip], gt: VideoClip | None
     streams = [_Stream(clip) for clip in imagined]
     gt_thumbs = Thumbnails()
     thumbs = [Thumbnails() for _ in streams]
+    quality = [FrameQuality() for _ in streams]
     known_gt: list[GtThumbnails | None] = []  # the clip's thumbnails from an earlier call, once looked up
 
     def gt_known() -> GtThumbnails | None:
@@ -135,6 +143,7 @@ def compare_clips(view: str, imagined: Sequence[VideoClip], gt: VideoClip | None
             rgb = item[1]
             if on_imagined is not None:
                 on_imagined(b, f, rgb)
+            quality[b].add(f, rgb)
             gt_rgb = gt_stream.frame_at(target, rgb.shape[1::-1]) if gt_stream is not None and target >= 0 else None
             _set(psnr[b], f, np.nan if gt_rgb is None else float(metrics.psnr(rgb[None], gt_rgb[None])[0]))
             if with_ssim:
@@ -155,8 +164,9 @@ def compare_clips(view: str, imagined: Sequence[VideoClip], gt: VideoClip | None
         if matchable and candidates is None:
             candidates = GT_THUMBNAILS.put(gt_stream, gt_thumbs)
     matches = [_match(t, candidates) if matchable and candidates is not None else None for t in thumbs]
-    return [VideoMetrics(view, np.array(p, dtype=np.float64), np.array(q, dtype=np.float64) if with_ssim else None, m)
-            for p, q, m in zip(psnr, ssim, matches)]
+    return [VideoMetrics(view, np.array(p, dtype=np.float64), np.array(q, dtype=np.float64) if with_ssim else None, m,
+                         fq.array(len(p)))
+            for p, q, m, fq in zip(psnr, ssim, matches, quality)]
 
 
 def _match(imagined: Thumbnails, gt: GtThumbnails) -> FrameMatch:

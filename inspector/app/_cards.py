@@ -20,6 +20,7 @@ from ..data.session import CHAINED_KINDS
 from ..errors import InspectorError, one_line
 from ..units import JOINT_NAMES
 from ._frames import LOADING, READY, FramePair
+from ._sanity_card import sanity_rows
 from ._video_only import is_video_only, joints_row
 
 CARD = "font-size:0.8rem;line-height:1.35;padding:0.1rem 0.2rem"
@@ -97,7 +98,7 @@ def headline_metrics(tl: RolloutTimeline, psnr: dict[str, np.ndarray | None] | N
             rows.append(("video PSNR", ", ".join(f"{v} {m:.1f} dB" for v, m in means.items())))
         elif loading_video:
             rows.append(("video PSNR", "computing…"))
-    return rows + reference_rows(tl.rollout.extra) + fact_rows(tl.rollout.extra)
+    return rows + sanity_rows(tl) + reference_rows(tl.rollout.extra) + fact_rows(tl.rollout.extra)
 
 
 def fact_rows(extra: object) -> list[tuple[str, str]]:

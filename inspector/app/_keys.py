@@ -25,6 +25,7 @@ HOTKEYS = {
     "Previous chunk": "pageup",
     "Next chunk": "pagedown",
     "Worst chunk": "W",
+    "Next flagged seam": "X",  # the chunk seams flagged as jumps (docs/metrics.md), in turn
 }
 # The Label panel's keys (see ._label_panel): command label -> hotkey.
 LABEL_HOTKEYS = {

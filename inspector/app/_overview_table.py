@@ -56,6 +56,13 @@ METRICS: dict[str, Callable[[Summary], float | None]] = {
     "EE error": _drift("ee_error_mm", "mean"),
     "limit steps": limit_steps,
     "reward": lambda s: (s.get("outcome") or {}).get("sum_reward"),
+    # the sanity measures (docs/metrics.md); rows cached before them have none
+    "worst seam": lambda s: ((s.get("seams") or {}).get("worst") or {}).get("jump_deg"),
+    "completion s": lambda s: (s.get("completion") or {}).get("time_s"),
+    "coupling": lambda s: max(c["coupling_error_deg"].values())
+    if (c := s.get("joint_coherence")) and c["coupling_error_deg"] else None,
+    "video break": lambda s: min(breaks) if (breaks := [b for b in (s.get("video_break") or {}).values()
+                                                        if b is not None]) else None,
 }
 
 
@@ -293,6 +300,14 @@ def _metric_cell(label: str, fmt: str) -> Callable[[OverviewRow], str]:
     return lambda r: "" if r.summary is None else _f(METRICS[label](r.summary), fmt)
 
 
+def _seams_cell(r: OverviewRow) -> str:
+    seams = r.summary.get("seams") if r.summary else None
+    if not seams:
+        return ""
+    worst = (seams.get("worst") or {}).get("jump_deg")
+    return f"{len(seams['flagged'])} ({_f(worst, '.1f')})" if seams["flagged"] else f"0 ({_f(worst, '.1f')})"
+
+
 def _success_cell(success: bool | None) -> str:
     if success is None:
         return "–"
@@ -346,6 +361,14 @@ def _columns(views: Sequence[str], notes: Mapping[str, Note], comparison: Compar
         _Column("EE mm", "end-effector error, mean [mm]", _metric_cell("EE error", ".1f")),
         _Column("limit steps", "steps with any joint past its URDF limit (beyond the margin)",
                 _metric_cell("limit steps", "d")),
+        _Column("seams", "flagged chunk seams (chunk k+1 jumping from chunk k's last executed action) and the "
+                "worst jump [deg]", _seams_cell, css="seams"),
+        _Column("done s", "completion: when the arm reaches the GT's final pose and stays [s] (never: –)",
+                _metric_cell("completion s", ".2f")),
+        _Column("coupling °", "joint coherence: the worst of shoulder-elbow and elbow-wrist coupling error [deg]",
+                _metric_cell("coupling", ".2f")),
+        _Column("video break", "the first chunk from which the imagined video stays degraded (any view)",
+                _metric_cell("video break", "d")),
     ]
     cols += [_Column(f"PSNR {v}", f"imagined vs GT frames, {v} camera [dB]",
                      cast(Callable[[OverviewRow], str],

@@ -47,6 +47,7 @@ from ._light_3d import apply_light_3d
 from ._overview import OverviewPanel
 from ._panels import NO_COMPARE, ControlPanel, PlotPanel, VideoPanel
 from ._playback_clip import CLIP_STEPS, encode_clip
+from ._sanity_card import flagged_seam_steps
 from ._scene import TabScene
 from ._video_only import is_video_only
 
@@ -344,6 +345,21 @@ class TabState:
                 return self.step
             chunk, why = self.loaded.timeline.worst_chunk()
             self._notify(f"Worst chunk: {chunk}", why)
+            return self.set_chunk(chunk, 0)
+
+    def jump_to_next_seam(self) -> int:
+        """The next flagged chunk seam after the current chunk (the first one after the last)."""
+        with self.lock:
+            if self.loaded is None:
+                return self.step
+            steps = flagged_seam_steps(self.loaded.timeline)
+            if not steps:
+                self._notify("No flagged seam", "no chunk jumps from the last one's executed action")
+                return self.step
+            later = [s for s in steps if s > self.step]
+            step = later[0] if later else steps[0]
+            chunk = step // self.loaded.timeline.steps_per_chunk
+            self._notify(f"Seam: chunk {chunk}", f"{len(steps)} flagged seam(s)")
             return self.set_chunk(chunk, 0)
 
     def _limit_text(self, step: int) -> list[str]:
@@ -734,6 +750,7 @@ class TabState:
             "Previous chunk": lambda: self.set_chunk(self.chunk - 1),
             "Next chunk": lambda: self.set_chunk(self.chunk + 1),
             "Worst chunk": self.jump_to_worst_chunk,
+            "Next flagged seam": self.jump_to_next_seam,
         }
         for label, key in HOTKEYS.items():
             gui.add_command(label, hotkey=key).on_trigger(user(lambda e, a=actions[label]: a()))

@@ -64,6 +64,7 @@ OUTCOMES_SIDECAR_SUFFIX = ".inspector-outcomes.json"
 ROLLOUTS_DIR = "rollouts"
 ACTIONS_FILE = "actions.npy"
 STATES_FILE = "states.npy"
+LATENTS_FILE = "latents.npy"  # optional (n, D): a latent vector per chunk (or sample)
 VIDEO_DIR = "video"
 GT_DIR = "gt"
 
@@ -157,6 +158,12 @@ class Rollout:
     @property
     def gt_actions(self) -> npt.NDArray[np.float64] | None:
         f = self._arrays.get("gt_actions")
+        return None if f is None else f.load()
+
+    @property
+    def latents(self) -> npt.NDArray[np.float64] | None:
+        """(n, D) latent vectors (one per chunk or sample), or None when the rollout has none."""
+        f = self._arrays.get("latents")
         return None if f is None else f.load()
 
     @property
@@ -491,6 +498,9 @@ def load_rollout(root: str | Path, units: Units | None = None, lazy: bool = Fals
         require(n_chunks == 1, root / ACTIONS_FILE, f"single_chunk rollout: expected 1 chunk, found {n_chunks}")
     if (root / STATES_FILE).exists():
         arrays["states"] = NpyFile(root / STATES_FILE, (n_chunks + 1, len(JOINT_NAMES)))
+    if (root / LATENTS_FILE).exists():
+        arrays["latents"] = NpyFile(root / LATENTS_FILE, ("n", "D"))
+        require(arrays["latents"].shape[0] >= 1, root / LATENTS_FILE, "no latent vectors (shape[0] == 0)")
     if (root / GT_DIR / ACTIONS_FILE).exists():
         arrays["gt_actions"] = NpyFile(root / GT_DIR / ACTIONS_FILE, ("T", len(JOINT_NAMES)))
         require(arrays["gt_actions"].shape[0] >= 1, root / GT_DIR / ACTIONS_FILE, "no GT steps (shape[0] == 0)")
@@ -895,6 +905,7 @@ class SessionWriter:
         gt_videos: Mapping[str, Any] | None = None,
         gt_episode_length: int | None = None,
         extra: Mapping[str, Any] | None = None,
+        latents: npt.ArrayLike | None = None,
         overwrite: bool = False,
         n_chunks: int | None = None,
         horizon: int | None = None,
@@ -914,6 +925,8 @@ class SessionWriter:
             gt_videos: optional ``{view: frames | path}``; frame i at imagined frame i's time.
             gt_episode_length: length of the real episode [frames], when known.
             extra: provenance and reference values to keep (JSON-serialisable).
+            latents: optional (n, D) latent vectors, one per chunk (or sample), for the latent
+                stability test (``latents.npy``).
 
         Returns:
             The rollout directory.
@@ -936,6 +949,9 @@ class SessionWriter:
                 np.save(staged / ACTIONS_FILE, actions_arr)
             if states is not None:
                 np.save(staged / STATES_FILE, np.asarray(states, dtype=np.float64))
+            if latents is not None:
+                np.save(staged / LATENTS_FILE, np.asarray(latents, dtype=np.float64).reshape(
+                    len(np.asarray(latents)), -1))
             if gt_actions is not None:
                 (staged / GT_DIR).mkdir()
                 np.save(staged / GT_DIR / ACTIONS_FILE, np.asarray(gt_actions, dtype=np.float64))

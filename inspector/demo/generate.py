@@ -14,7 +14,14 @@ overrun_60chunks        60 chunks (540 steps) on a shorter episode: post-episode
 prompt_train/novel      same start; novel veers for 2 chunks, then the same path
 video_ahead_1s          prompt_train's joints; its imagined video 1 s (30 frames) ahead of them
 single_fNNN             single chunks along an episode, error growing with the horizon
+seam_jump               shoulder_pan jumps 20 deg where chunk 12 takes over from chunk 11
+early_wander            twice as fast from 10 s, holds at the final pose, wanders from 12.5 s
+phase_lag_wrist         wrist_flex 10 steps (0.33 s) behind the GT; the other joints in phase
+video_degrades          noise growing in the imagined video from chunk 12 on
 ======================  ==============================================================
+
+The last four (the sanity measures' faults) are derived from the episode's path and
+prompt_train's rendered frames (:func:`write_sanity_rollouts`), so they cost no rendering.
 
 Imagined video is rendered from the *predicted* joints (cheap settings), then visibly degraded
 (blur, colour shift, noise, a slight wobble) so it reads as imagined.
@@ -22,6 +29,7 @@ Imagined video is rendered from the *predicted* joints (cheap settings), then vi
 
 from __future__ import annotations
 
+import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -90,6 +98,7 @@ def rebuild_demo(out: Path | None = None, quick: bool = False, log: Callable[[st
         write_lerobot_dataset(writer.root / DATASET_DIR,
                               [EpisodeData(e.task, e.state, e.action, e.frames) for e in episodes],
                               fps=int(FPS), units=Units("degrees"))  # LeRobot writes a whole fps
+        train_frames: dict[str, npt.NDArray[np.uint8]] = {}
         for spec in _rollout_specs(episodes, rng, quick):
             ep = episodes[spec.episode]
             executed, chunks, path_time = spec.build(ep.action, rng)
@@ -107,6 +116,9 @@ def rebuild_demo(out: Path | None = None, quick: bool = False, log: Callable[[st
             log(f"rollout {spec.tag}: {spec.fault}")
             if spec.tag == "prompt_train":
                 _write_video_ahead(writer, spec, chunks, states, frames, log)
+                train_frames = frames
+        if train_frames:
+            write_sanity_rollouts(writer, episodes[0].action, train_frames, log)
     size_mb = sum(f.stat().st_size for f in out.rglob("*") if f.is_file()) / 1e6
     log(f"demo session {out}: {size_mb:.1f} MB in {time.perf_counter() - started:.0f} s")
     return out
@@ -125,6 +137,112 @@ def _write_video_ahead(writer: SessionWriter, spec: _Spec, chunks: npt.NDArray[n
                        executed_per_chunk=EXECUTED, frames_per_chunk=EXECUTED, videos=ahead,
                        extra={"planted_fault": fault})
     log(f"rollout video_ahead_1s: {fault}")
+
+
+# ----------------------------------------------------------------------------------------------
+# The sanity measures' faults (seams, completion, joint coherence, video break)
+
+SEAM_CHUNK, SEAM_JUMP_DEG = 12, 20.0  # seam_jump: shoulder_pan +20 deg from chunk 12 on
+# early_wander: real speed until 10 s, then twice as fast to the end of the path, held there,
+# wandering from 12.5 s
+HURRY_FROM_S, HURRY_TEMPO, WANDER_FROM_S, WANDER_DEG = 10.0, 2.0, 12.5, 30.0
+PHASE_LAG_STEPS = 10  # phase_lag_wrist: wrist_flex this many steps behind
+DEGRADE_FROM_CHUNK = 12  # video_degrades: noise from this chunk on, growing
+SANITY_SEED = SEED + 1  # its own draws: the older rollouts' stay as they were
+SANITY_TAGS = ("seam_jump", "phase_lag_wrist", "video_degrades", "early_wander")
+
+
+def write_sanity_rollouts(writer: SessionWriter, gt: npt.NDArray[np.float64],
+                          train_frames: dict[str, npt.NDArray[np.uint8]], log: Callable[[str], None] = print) -> None:
+    """Add the four rollouts whose faults the sanity measures must find, on episode 0 from frame 0.
+
+    Args:
+        gt: (G, 6) episode 0's actions.
+        train_frames: prompt_train's imagined frames per camera (the GT path at real speed, one
+            frame a step): the new rollouts show them re-timed, so nothing is rendered.
+    """
+    rng = np.random.default_rng(SANITY_SEED)
+    j = {name: i for i, name in enumerate(JOINT_NAMES)}
+    n_frames = min(len(f) for f in train_frames.values())
+    end_time = len(gt) - 1
+
+    def chunked(path_time: npt.NDArray[np.float64], n_chunks: int, shift=None) -> npt.NDArray[np.float64]:
+        full = _sample(gt, path_time)
+        if shift is not None:
+            full = shift(full)
+        full[:, :5] += rng.normal(scale=0.15, size=(len(full), 5))
+        chunks = np.stack([full[k * EXECUTED:k * EXECUTED + HORIZON] for k in range(n_chunks)])
+        chunks[:, EXECUTED:, :5] += rng.normal(scale=0.6, size=(n_chunks, HORIZON - EXECUTED, 5)).cumsum(axis=1)
+        return chunks
+
+    def shown(path_time: npt.NDArray[np.float64]) -> dict[str, npt.NDArray[np.uint8]]:
+        index = np.clip(np.round(path_time).astype(int), 0, n_frames - 1)
+        return {camera: f[index] for camera, f in train_frames.items()}
+
+    def add(tag: str, fault: str, chunks: npt.NDArray[np.float64], videos: dict[str, npt.NDArray[np.uint8]]) -> None:
+        states = np.concatenate([chunks[:1, 0], chunks[:, EXECUTED - 1]])
+        writer.add_rollout(tag, kind="autoregressive", actions=chunks, states=states, prompt="Pick the red cube",
+                           episode_index=0, start_frame=0, fps=FPS, executed_per_chunk=EXECUTED,
+                           frames_per_chunk=EXECUTED, videos=videos, extra={"planted_fault": fault})
+        log(f"rollout {tag}: {fault}")
+
+    n = 25  # chunks: long enough for each fault, short enough to keep the demo small
+    steps = np.arange(n * EXECUTED + HORIZON, dtype=np.float64)
+    seam = chunked(steps, n)
+    seam[SEAM_CHUNK:, :, j["shoulder_pan"]] += SEAM_JUMP_DEG
+    add("seam_jump", f"shoulder_pan jumps {SEAM_JUMP_DEG:g} deg where chunk {SEAM_CHUNK} takes over", seam,
+        shown(steps[: n * EXECUTED]))
+
+    def lag_wrist(full: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        full[:, j["wrist_flex"]] = _sample(gt, steps - PHASE_LAG_STEPS)[:, j["wrist_flex"]]
+        return full
+    add("phase_lag_wrist", f"wrist_flex {PHASE_LAG_STEPS} steps ({PHASE_LAG_STEPS / FPS:.2f} s) behind the GT",
+        chunked(steps, n, lag_wrist), shown(steps[: n * EXECUTED]))
+
+    n_degrade = 18
+    steps_d = np.arange(n_degrade * EXECUTED + HORIZON, dtype=np.float64)
+    frames = shown(steps_d[: n_degrade * EXECUTED])
+    noisy = {}
+    for camera, f in frames.items():
+        chunk = np.arange(len(f)) // EXECUTED
+        sigma = np.where(chunk >= DEGRADE_FROM_CHUNK, 26.0 + 4.0 * (chunk - DEGRADE_FROM_CHUNK), 0.0)
+        # grain of 2x2 pixels: as plain to the eye and to the measure, and cheaper to store
+        grain = rng.normal(size=(len(f), -(-f.shape[1] // 2), -(-f.shape[2] // 2), 3)).astype(np.float32)
+        grain = grain.repeat(2, axis=1).repeat(2, axis=2)[:, : f.shape[1], : f.shape[2]]
+        noise = grain * sigma[:, None, None, None].astype(np.float32)
+        noisy[camera] = np.clip(f.astype(np.float32) + noise, 0, 255).astype(np.uint8)
+    add("video_degrades", f"imagined video noise growing from chunk {DEGRADE_FROM_CHUNK} on",
+        chunked(steps_d, n_degrade), noisy)
+
+    n_early = len(gt) // EXECUTED
+    steps_e = np.arange(n_early * EXECUTED + HORIZON, dtype=np.float64)
+    hurry = HURRY_FROM_S * FPS
+    path_time = np.minimum(np.where(steps_e < hurry, steps_e, hurry + HURRY_TEMPO * (steps_e - hurry)), end_time)
+
+    def wander(full: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        t = steps_e / FPS - WANDER_FROM_S
+        full[:, j["shoulder_pan"]] += WANDER_DEG * np.sin(np.pi * np.clip(t / 1.5, 0, 1)) * (t > 0)
+        return full
+    add("early_wander", f"the path {HURRY_TEMPO:g}x as fast from {HURRY_FROM_S:g} s, held at its end, "
+                        f"wandering from {WANDER_FROM_S:g} s",
+        chunked(path_time, n_early, wander), shown(path_time[: n_early * EXECUTED]))
+
+
+def plant_sanity_rollouts(session_dir: Path, log: Callable[[str], None] = print) -> None:
+    """Add :func:`write_sanity_rollouts`' rollouts to an existing demo session (from its dataset
+    and prompt_train's videos on disk), replacing them if there."""
+    from ..data.lerobot_dataset import open_dataset
+    from ..data.session import open_session
+
+    session = open_session(session_dir)
+    assert session.dataset_root is not None
+    gt = open_dataset(session.dataset_root).episode(0).action
+    train = session.rollouts["prompt_train"]
+    frames = {view: train.video(view).decode() for view in train.views}
+    with SessionWriter.append(session_dir) as writer:
+        for tag in SANITY_TAGS:
+            shutil.rmtree(Path(session_dir) / "rollouts" / tag, ignore_errors=True)
+        write_sanity_rollouts(writer, np.asarray(gt, np.float64), frames, log)
 
 
 def _speed_up(waypoints, speed: float):

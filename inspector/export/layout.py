@@ -197,6 +197,12 @@ def build_blueprint(contents: Contents) -> rrb.Blueprint:
     if contents.gt_joints and contents.chunks:
         plots.append(rrb.TimeSeriesView(name="Chunk RMSE", origin=f"/{CHUNK_RMSE}",
                                         contents=["$origin", markers]))
+    if contents.chunks:  # the sanity measures of chained rollouts (inspector/export/sanity_series.py)
+        plots.append(rrb.TimeSeriesView(name="Chunk seams [deg]", origin=f"/{PLOTS}/seams",
+                                        contents=["$origin/**", markers]))
+        if contents.psnr_views:
+            plots.append(rrb.TimeSeriesView(name="Video degradation (x chunk 0)", origin=f"/{PLOTS}/video_degradation",
+                                            contents=["$origin/**", markers]))
 
     title = (f"Arms: {contents.gt_name} (opaque) vs {contents.pred_name} (translucent)" if contents.gt_joints
              else f"Arm: {contents.pred_name} (no GT joints)")

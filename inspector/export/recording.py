@@ -43,6 +43,7 @@ from . import layout as L
 from .arms import log_arms, prepare_meshes
 from .description import describe
 from .outcomes import log_outcomes
+from .sanity_series import log_sanity
 from .series import log_markers, log_metric_series, log_psnr, log_video_action
 from .video import Progress, frame_indexes, log_view
 
@@ -169,6 +170,7 @@ def _log_recording(rec: rr.RecordingStream, tl: RolloutTimeline, views: list[str
         report(0.80, "metric series")
         log_metric_series(rec, tl, steps_indexes)
     log_markers(rec, tl, steps_indexes)
+    log_sanity(rec, tl, steps_indexes)
     for i, (view, series) in enumerate(psnr.items()):
         log_psnr(rec, tl, view, series, frames_indexes, L.VIEW_RGBA[i % len(L.VIEW_RGBA)])
         if view in agreements:

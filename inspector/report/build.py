@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from ..analysis.latents import latents_summary
 from ..analysis.video_action import median_lag_label
 from ..cache import warn_once
 from ..data.episodes import episode_tag
@@ -26,6 +27,7 @@ from ..jobs.ray import ray_workers
 from ..units import DEFAULT_LIMIT_MARGIN_DEG, JOINT_NAMES
 from .outcomes import attach_outcomes, outcome_lines, success_lines
 from .rows import aggregate, limit_margin, limit_steps, prompt_divergence_record, prompt_pairs
+from .sanity_text import sanity_lines
 from .tasks import EpisodeTask, Task, plan_episode_tasks, plan_tasks, run_tasks, run_tasks_on_ray
 from .trajectories import TRAJECTORY_LAYOUT, trajectory_table
 
@@ -124,6 +126,7 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
         divergences = _prompt_divergences(sources, session_keys, rows)
         if divergences:
             report["prompt_divergence"] = divergences
+        report["latents"] = _latents(sources, session_keys, rows)
         episodes = [rows[k] for k in keys if k[0] in dataset_roots]
         trajectories = [e for e in episodes if e.get("layout") == TRAJECTORY_LAYOUT]
         if trajectories:
@@ -158,6 +161,19 @@ def _prompt_divergences(sources, keys: list[tuple[str, str]], rows: dict) -> lis
         a.release_arrays()
         b.release_arrays()
     return out
+
+
+def _latents(sources, keys: list[tuple[str, str]], rows: dict) -> dict[str, Any] | None:
+    """PCA and episode silhouette of the rollouts' latents (None when none has any)."""
+    sessions = {str(s.root): s for s in sources.sessions}
+    entries = []
+    for root, tag in keys:
+        if rows[(root, tag)].get("latents") is None:
+            continue
+        rollout = sessions[root].rollouts[tag]
+        entries.append((tag, rows[(root, tag)]["episode_index"], rollout.latents))
+        rollout.release_arrays()
+    return latents_summary(entries)
 
 
 def _progress_bar(total: int, show: bool | None):
@@ -249,6 +265,7 @@ def format_report(report: dict[str, Any]) -> str:
         collapse = "never" if p["collapse_chunk"] is None else f"from chunk {p['collapse_chunk']}"
         lines.append(f"Prompt divergence {p['a']} vs {p['b']}: mean {p['mean']:.2f}, max {p['max']:.2f}; "
                      f"paths indistinguishable {collapse}")
+    lines += sanity_lines(report)
     return "\n".join(lines)
 
 

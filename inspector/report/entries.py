@@ -50,10 +50,13 @@ def read_entry(cache: MetricsCache, key: str) -> CachedMetrics:
 
 def is_consistent(entry: MetricsEntry) -> bool:
     """What the entry's type cannot say: each view's record is its own, and its per-frame series
-    (SSIM beside PSNR; the frame match's GT index, confidence and tied runs) are of one length."""
+    (SSIM and the no-reference measures beside PSNR, three of those a frame; the frame match's GT
+    index, confidence and tied runs) are of one length."""
     for view, record in entry["video"].items():
-        ssim, match = record["ssim"], record["match"]
+        ssim, match, quality = record["ssim"], record["match"], record["quality"]
         if record["view"] != view or (ssim is not None and len(ssim) != len(record["psnr_db"])):
+            return False
+        if quality is not None and (len(quality) != len(record["psnr_db"]) or any(len(q) != 3 for q in quality)):
             return False
         if match is not None and not (len(match["gt_index"]) == len(match["confidence"]) == len(match["ties"])
                                       and all(len(runs) % 2 == 0 for runs in match["ties"])):

@@ -35,6 +35,7 @@ from .episode_figures import episode_figures, episode_key, episode_summary_numbe
 from .figures import Figure, report_figures
 from .html_outcomes import outcome_columns, success_section
 from .rows import limit_margin, limit_steps
+from .sanity_html import sanity_section
 from .svg import legend_html
 
 Row = dict[str, Any]
@@ -375,7 +376,8 @@ def render_report_html(report: dict[str, Any], title: str | None = None,
             f"<h2>Summary</h2>{_summary(report)}{_errors(report)}{success_section(report['aggregate'])}"
             f'<h2>Figures</h2><div class="figures">{figures}</div>'
             f"<h2>Rollouts</h2>{_table_tools(len(rows), 'filter', 'shown', 'filter rows (tag, prompt, kind ...)')}"
-            f'<div class="table-wrap">{_table(rows, links)}</div>')
+            f'<div class="table-wrap">{_table(rows, links)}</div>'
+            + sanity_section(report, figure_html))
     if episodes:
         figures = "".join(figure_html(f) for f in episode_figures(episodes))
         body.append(

@@ -16,6 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..analysis import metrics
+from ..analysis.sanity import CoherenceJson, CompletionJson, LatentsJson, SeamsJson, VideoBreakJson, aggregate_measures, sanity_measures
 from ..analysis.timeline import RolloutTimeline
 from ..analysis.video_action import ViewAgreementJson
 from ..analysis.video_metrics import VideoMetrics
@@ -97,6 +98,13 @@ class RolloutRow(TypedDict):
     gt_warning: str | None
     chunk_joints: ChunkJoints | None
     outcome: dict[str, Any] | None  # a simulated evaluation's verdict (lerobot-eval): success, rewards, task
+    # the sanity measures (analysis/sanity.py)
+    seams: SeamsJson | None
+    completion: CompletionJson | None
+    joint_coherence: CoherenceJson | None
+    video_break: dict[str, int | None]
+    video_degradation: dict[str, VideoBreakJson]
+    latents: LatentsJson | None
 
 
 class VideoPerChunk(TypedDict):
@@ -154,12 +162,14 @@ def limit_record(summary: metrics.LimitSummary, margin_deg: float) -> LimitRecor
             "margin_deg": float(margin_deg)}
 
 
-def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> dict[str, Any]:
+def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics],
+                    imagined_quality: Mapping[str, np.ndarray] | None = None) -> dict[str, Any]:
     """The JSON record of one rollout (fields needing GT joints are null without them).
 
     Args:
         tl: the rollout's timeline.
         video: its video metrics per view (views without GT frames may be left out).
+        imagined_quality: per-frame no-reference measures of views without GT video.
     """
     r = tl.rollout
     ce = tl.chunk_errors
@@ -176,6 +186,7 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> d
     agreement, agreement_note = video_action_record(tl, video)
     worst, worst_by = tl.worst_chunk()
     joints = tl.has_joints
+    sanity = sanity_measures(tl, video, imagined_quality)
     episode_length = None
     if tl.gt.episode_length is not None:  # counted from the rollout's step 0: back to the episode's start
         episode_length = int(tl.gt.episode_length - tl.gt.offset + r.start_frame)
@@ -212,6 +223,12 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics]) -> d
         "chunk_joints": _chunk_joints(tl) if joints else None,
         # a simulated evaluation's verdict (success, rewards, task), as its importer kept it
         "outcome": r.extra.get("outcome"),
+        "seams": sanity["seams"],
+        "completion": sanity["completion"],
+        "joint_coherence": sanity["joint_coherence"],
+        "video_break": sanity["video_break"],
+        "video_degradation": sanity["video_degradation"],
+        "latents": sanity["latents"],
     }
     return cast(dict[str, Any], row)  # a plain dict from here on, as every other report record
 
@@ -268,6 +285,7 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
         # success rates with their Wilson intervals, over the rows' effective outcomes
         **({"success_by_task": by_task, "success_overall": success_overall(by_task)}
            if (by_task := success_by_task(rows)) else {}),
+        "sanity_measures": aggregate_measures(rows),
     }
 
 

@@ -20,13 +20,14 @@ from pathlib import Path
 from typing import Any, cast
 
 from ..analysis.timeline import batch_key, build_timeline, build_timelines
+from ..analysis.video_break import clip_quality
 from ..analysis.video_metrics import VideoMetrics, compare_clips
 from ..cache import MetricsCache, rollout_key, take_unsaid
 from ..data.episodes import episode_rollout, episode_tag
 from ..data.ground_truth import resolve_ground_truth
 from ..data.importers.groot_dreams import NeuralTrajectories, open_trajectories
 from ..data.lerobot_dataset import open_dataset
-from ..data.session import load_session_rollout, read_session_with_gt
+from ..data.session import CHAINED_KINDS, load_session_rollout, read_session_with_gt
 from ..errors import InspectorError
 from ..jobs.pool import init_worker, interruptible, local_pool
 from ..jobs.ray import RayWorkers
@@ -275,7 +276,9 @@ def _compute_together(batch: list[_Pending], task: Task, cache) -> list[Outcome]
     for p, tl in zip(batch, timelines):
         p.timeline = tl
         for view, vm in p.video.items():
-            if view in tl.video_views():  # an entry's view the rollout lacks would show in its row
+            # an entry's view the rollout lacks would show in its row; one kept without the
+            # no-reference measures (written before them) is computed again
+            if view in tl.video_views() and vm.quality is not None:
                 tl.set_video_metrics(vm)
     views = sorted({v for tl in timelines for v in tl.video_views()})
     for view in views:
@@ -290,10 +293,18 @@ def _compute_together(batch: list[_Pending], task: Task, cache) -> list[Outcome]
     outcomes = []
     for p in batch:
         video = p.timeline.known_video_metrics()
-        row = rollout_summary(p.timeline, video)
+        row = rollout_summary(p.timeline, video, _imagined_only_quality(p.timeline))
         write_entry(cache, p.key, row, video)
         outcomes.append(Outcome(task.session_root, p.rollout.tag, row=row))
     return outcomes
+
+
+def _imagined_only_quality(tl) -> dict[str, Any]:
+    """Per-frame no-reference measures of a chained rollout's views that have no GT video (the
+    others got theirs in the pass against the GT)."""
+    if tl.kind not in CHAINED_KINDS:
+        return {}
+    return {view: clip_quality(tl.rollout.video(view)) for view in tl.rollout.views if view not in tl.video_views()}
 
 
 # ----------------------------------------------------------------------------------------------

@@ -1,0 +1,92 @@
+"""The sanity measures of one rollout, as its report row carries them: chunk seams, completion,
+joint coherence, where the imagined video breaks, and whether it has latents.
+
+Each is defined in its own module under :mod:`inspector.analysis` (and in docs/metrics.md); this
+one only feeds them a timeline and shapes their records (for report rows, the app and recordings).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, TypedDict
+
+import numpy as np
+import numpy.typing as npt
+
+from ..data.session import CHAINED_KINDS
+from ..robot.kinematics import kinematics
+from .coherence import CoherenceJson, coherence_record
+from .completion import CompletionJson, completion_record
+from .seams import SeamsJson, jerk_p95, seam_jumps, seams_record
+from .timeline import RolloutTimeline
+from .video_break import VideoBreakJson, video_break_record
+from .video_metrics import VideoMetrics
+
+
+class LatentsJson(TypedDict):
+    n: int
+    dim: int
+
+
+class SanityMeasures(TypedDict):
+    seams: SeamsJson | None
+    completion: CompletionJson | None
+    joint_coherence: CoherenceJson | None
+    video_break: dict[str, int | None]
+    video_degradation: dict[str, VideoBreakJson]
+    latents: LatentsJson | None
+
+
+def sanity_measures(tl: RolloutTimeline, video: Mapping[str, VideoMetrics],
+                    imagined_quality: Mapping[str, npt.NDArray[np.float64]] | None = None) -> SanityMeasures:
+    """The five measures of ``tl`` (each null where it does not apply or cannot be measured).
+
+    Args:
+        video: its video metrics per view (their per-frame ``quality`` feeds the video break).
+        imagined_quality: (F, 3) per-frame measures of views without GT video, measured apart.
+    """
+    chained = tl.kind in CHAINED_KINDS
+    inside = ~tl.post_episode if tl.post_episode is not None else np.ones(tl.n_steps, bool)
+    seams = None
+    if chained:
+        s = seam_jumps(tl.chunks, tl.executed_per_chunk, tl.gt_aligned, inside)
+        gt_jerk = jerk_p95(tl.gt_aligned[inside], tl.fps) if tl.gt_aligned is not None else None
+        seams = seams_record(s, jerk_p95(tl.pred, tl.fps), gt_jerk)
+    completion = None
+    if chained and tl.gt.actions is not None and tl.time_aligned_drift is not None:
+        units = tl.units
+        completion = completion_record(tl.pred, tl.ee_pred, tl.gt.actions,
+                                       lambda q: kinematics().gripper_positions(q, units), tl.gt.offset,
+                                       tl.time_aligned_drift, tl.fps)
+    coherence = None
+    if tl.gt_aligned is not None:
+        coherence = coherence_record(tl.pred, tl.gt_aligned, inside, tl.fps)
+    degradation: dict[str, VideoBreakJson] = {}
+    if chained:
+        per_view = {v: vm.quality for v, vm in video.items() if vm.quality is not None}
+        per_view.update(imagined_quality or {})
+        for view in sorted(per_view):
+            degradation[view] = video_break_record(per_view[view], tl.rollout.frames_per_chunk)
+    latents = tl.rollout.latents
+    return {"seams": seams, "completion": completion, "joint_coherence": coherence,
+            "video_break": {v: d["break_chunk"] for v, d in degradation.items()},
+            "video_degradation": degradation,
+            "latents": None if latents is None else {"n": int(latents.shape[0]), "dim": int(latents.shape[1])}}
+
+
+def aggregate_measures(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Over the rows: flagged seams, completions, worst coupling error, video breaks."""
+    chained = [r for r in rows if r.get("seams") is not None]
+    completions = [r["completion"] for r in rows if r.get("completion") is not None]
+    coupling = [max(c["coupling_error_deg"].values()) for r in rows
+                if (c := r.get("joint_coherence")) is not None and c["coupling_error_deg"]]
+    breaks = [b for r in rows for b in (r.get("video_break") or {}).values()]
+    return {
+        "rollouts_with_flagged_seams": sum(bool(r["seams"]["flagged"]) for r in chained),
+        "flagged_seams": sum(len(r["seams"]["flagged"]) for r in chained),
+        "completed": sum(c["time_s"] is not None for c in completions),
+        "completion_measured": len(completions),
+        "worst_coupling_error_deg": max(coupling) if coupling else None,
+        "video_views_broken": sum(b is not None for b in breaks),
+        "video_views_measured": len(breaks),
+    }

@@ -1,0 +1,44 @@
+"""The sanity measures of a rollout as rows of its card (see docs/metrics.md, Sanity measures)."""
+
+from __future__ import annotations
+
+from ..analysis.sanity import sanity_measures
+from ..analysis.timeline import RolloutTimeline
+
+
+def sanity_rows(tl: RolloutTimeline) -> list[tuple[str, str]]:
+    """(name, value) rows: flagged seams, completion, joint coherence, video breaks (as far as
+    the video metrics computed so far tell)."""
+    m = sanity_measures(tl, tl.known_video_metrics())
+    rows: list[tuple[str, str]] = []
+    seams = m["seams"]
+    if seams is not None:
+        worst = seams["worst"]
+        flagged = ", ".join(map(str, seams["flagged"])) or "none"
+        rows.append(("chunk seams flagged", f"{flagged}" + (f" · worst {worst['jump_deg']:.1f}° at chunk {worst['chunk']}"
+                                                            if worst else "")))
+    c = m["completion"]
+    if c is not None:
+        if c["time_s"] is None:
+            rows.append(("completion", f"never (GT at {c['gt_time_s']} s)"))
+        else:
+            rows.append(("completion", f"{c['time_s']:.2f} s (GT {c['gt_time_s']} s){' · early' if c['early'] else ''}"
+                                       f" · drift before {c['drift_before']:.1f}° / after {c['drift_after']:.1f}°"))
+    j = m["joint_coherence"]
+    if j is not None and j["coupling_error_deg"]:
+        phase = ", ".join(f"{k} {j['phase_offset_steps'][k]:+d} steps" for k in j["out_of_phase"]) or "none"
+        rows.append(("joint coherence", f"coupling worst {max(j['coupling_error_deg'].values()):.2f}° · "
+                                        f"out of phase: {phase}"))
+    if m["video_break"]:
+        rows.append(("video break", ", ".join(f"{v} {'holds' if b is None else f'chunk {b}'}"
+                                              for v, b in sorted(m["video_break"].items()))))
+    return rows
+
+
+def flagged_seam_steps(tl: RolloutTimeline) -> list[int]:
+    """Steps where a flagged seam's chunk starts (the targets of the seam key)."""
+    m = sanity_measures(tl, {})
+    seams = m["seams"]
+    if seams is None:
+        return []
+    return [int(min(tl.chunk_start_step[k], tl.n_steps - 1)) for k in seams["flagged"]]
