@@ -130,7 +130,7 @@ def test_report_exits_0_with_success_per_task_psnr_per_view_and_null_joints(eval
     by_task = {t["task"]: (t["episodes"], t["successes"]) for t in agg["success_by_task"]}
     assert by_task == {"pusht_0": (2, 1), "pusht_1": (1, 1)}
     text = cli("report", "--no-cache", evaluation).stdout
-    assert "pusht_0: 1/2 (50%)" in text and "PSNR render" in text
+    assert "pusht_0: 1/2 (50%, 95% CI 9-91%)" in text and "PSNR render" in text
 
 
 def test_info_says_video_only(evaluation):
