@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from browser import launch, open_page, skip_reason, wait_until
+from browser import open_page, skip_reason, wait_until
 
 from inspector.app import serve
 from inspector.data.session import SessionWriter
@@ -37,16 +37,6 @@ GOOD = {"dir": "run_k7", "name": "ckpt_alpha_7731", "model": "alpha-model-x"}
 WORSE = {"dir": "run_q2", "name": "ckpt_omega_1942", "model": "omega-model-y"}
 SECRETS = [GOOD["name"], GOOD["model"], WORSE["name"], WORSE["model"], GOOD["dir"], WORSE["dir"]]
 VOTES = 6  # the last one a tie
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = launch(p)
-        yield b
-        b.close()
 
 
 def _copy(dest: Path, who: dict) -> Path:
