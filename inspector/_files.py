@@ -10,9 +10,15 @@ other output has.
 
 from __future__ import annotations
 
+import contextlib
+import errno
+import fcntl
 import os
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
+
+from .errors import InspectorError
 
 
 def process_umask() -> int:
@@ -52,6 +58,28 @@ def mkdtemp_sibling(dest: Path, suffix: str = ".partial") -> Path:
         staged.rmdir()
         raise
     return staged
+
+
+@contextlib.contextmanager
+def exclusive_lock(lock: Path) -> Iterator[None]:
+    """Hold an exclusive ``flock`` on ``lock`` (created if missing): writers of one file (two tabs,
+    two processes) take turns at read-modify-write, so neither loses the other's change.
+
+    Raises:
+        InspectorError: ``lock`` is a symbolic link (it would let the lock file land elsewhere).
+    """
+    try:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise InspectorError(lock, "is a symbolic link; refusing to follow it") from None
+        raise
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        os.close(fd)
 
 
 def short_name(name: str) -> str:

@@ -19,14 +19,13 @@ Layout::
 from __future__ import annotations
 
 import contextlib
-import errno
-import fcntl
 import os
 from collections.abc import Iterator
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from .._files import exclusive_lock
 from ..data.session import ANNOTATIONS_FILE, read_json, write_json_atomic
 from ..errors import InspectorError
 
@@ -37,19 +36,8 @@ MAX_NOTE_CHARS = 10_000
 
 @contextlib.contextmanager
 def _locked(session_root: Path) -> Iterator[None]:
-    lock = session_root / LOCK_FILE
-    try:
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
-    except OSError as exc:
-        if exc.errno == errno.ELOOP:
-            raise InspectorError(lock, "is a symbolic link; refusing to follow it") from None
-        raise
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
+    with exclusive_lock(session_root / LOCK_FILE):
         yield
-    finally:
-        fcntl.flock(fd, fcntl.LOCK_UN)
-        os.close(fd)
 
 
 def annotations_path(session_root: str | Path) -> Path:

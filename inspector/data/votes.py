@@ -23,8 +23,6 @@ outcome records (:mod:`inspector.outcomes`), when given.
 from __future__ import annotations
 
 import contextlib
-import errno
-import fcntl
 import math
 import os
 import uuid
@@ -34,6 +32,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from .._files import exclusive_lock
 from ..errors import InspectorError
 from .session import read_json, write_json_atomic
 
@@ -73,19 +72,8 @@ class Vote:
 
 @contextlib.contextmanager
 def _locked(session_root: Path) -> Iterator[None]:
-    lock = session_root / LOCK_FILE
-    try:
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
-    except OSError as exc:
-        if exc.errno == errno.ELOOP:
-            raise InspectorError(lock, "is a symbolic link; refusing to follow it") from None
-        raise
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
+    with exclusive_lock(session_root / LOCK_FILE):
         yield
-    finally:
-        fcntl.flock(fd, fcntl.LOCK_UN)
-        os.close(fd)
 
 
 def votes_path(session_root: str | Path) -> Path:

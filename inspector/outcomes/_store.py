@@ -4,13 +4,12 @@ atomic, and never overwriting a file that does not parse."""
 from __future__ import annotations
 
 import contextlib
-import errno
-import fcntl
 import os
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
+from .._files import exclusive_lock
 from ..data.session import OUTCOMES_FILE, OUTCOMES_SIDECAR_SUFFIX, read_json, write_json_atomic
 from ..errors import InspectorError
 from ..schema import mismatch, shown
@@ -118,22 +117,11 @@ def known_failure_tags(document: Mapping[str, Any]) -> tuple[str, ...]:
 
 @contextlib.contextmanager
 def _locked(path: Path) -> Iterator[None]:
-    lock = path.parent / f".{path.name}.lock"
-    try:
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
-    except OSError as exc:
-        if exc.errno == errno.ELOOP:
-            raise InspectorError(lock, "is a symbolic link; refusing to follow it") from None
-        raise
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
+    with exclusive_lock(path.parent / f".{path.name}.lock"):
         for tmp in path.parent.glob(f".{path.name}.*.tmp"):  # left by a writer killed mid-write
             with contextlib.suppress(OSError):
                 tmp.unlink()
         yield
-    finally:
-        fcntl.flock(fd, fcntl.LOCK_UN)
-        os.close(fd)
 
 
 def update_outcome(path: str | Path, tag: str, changes: Mapping[str, Any], *, source: Source = "label",
