@@ -1,14 +1,21 @@
-"""A/B mode's pairs: rollouts of two sessions from the same start, least-compared first."""
+"""A/B mode's pairs: rollouts of two sessions from the same start, least-compared first; and the
+pair's arms in the 3D scene, as a (browser-less) client receives them: named by side only, posed
+at the pair's playback step."""
 
 from __future__ import annotations
 
+import json
 import random
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from inspector.app import serve
+from inspector.app._ab_arms import side_origin
 from inspector.app._ab_mode import choose_pair, parse_progress, plan_candidates
+from inspector.app._headless import HeadlessClient
 from inspector.data.session import SessionWriter, open_session
 from inspector.data.votes import Side, new_vote
 
@@ -53,3 +60,57 @@ def test_progress_field_text():
     for bad in ("120", "-1", "nan", "lots"):
         with pytest.raises(ValueError):
             parse_progress(bad)
+
+
+DEMO = Path(__file__).resolve().parents[1] / "sessions" / "demo"
+
+
+def _named_demo(dest: Path, name: str, model: str) -> Path:
+    shutil.copytree(DEMO, dest, ignore=shutil.ignore_patterns("votes.json", "outcomes.json", ".*.lock"))
+    meta = json.loads((dest / "session.json").read_text())
+    meta["name"], meta["model"] = name, {"name": model}
+    (dest / "session.json").write_text(json.dumps(meta))
+    return dest
+
+
+@pytest.mark.slow  # two demo copies served, the arm meshes loaded
+def test_the_pair_arms_are_drawn_side_by_side_named_by_side_only(tmp_path):
+    secrets = ["ckpt_alpha_7731", "alpha-model-x", "ckpt_omega_1942", "omega-model-y", "run_k7", "run_q2"]
+    sessions = [_named_demo(tmp_path / "run_k7", *secrets[:2]), _named_demo(tmp_path / "run_q2", *secrets[2:4])]
+    app = serve(sessions, port=0, block=False, ab=True)
+    try:
+        with HeadlessClient(app.port, observe=True) as client:
+            arms = [f"/ab/{side}/{who}" for side in "AB" for who in ("pred", "gt")]  # the demo has GT
+            client.wait_until(lambda: all(a in client.scene_nodes for a in arms), what="both sides' arms")
+            nodes = dict(client.scene_nodes)
+            assert sum(n.startswith("/ab/A/pred/") for n in nodes) >= 6  # the arm's links, under its side
+            named = [n for n in nodes for s in secrets if s in n]
+            texts = [json.dumps(n["props"], default=str) for n in nodes.values()]
+            assert not named and not [s for s in secrets for t in texts if s in t]
+            labels = {n["props"]["text"] for n in nodes.values() if n["type"] == "LabelMessage"}
+            assert labels == {"A", "B"}
+            # A stands left of B as the camera sees it, the two well apart
+            a, b = np.array(side_origin("A")), np.array(side_origin("B"))
+            assert np.linalg.norm(a - b) >= 0.5 and np.allclose(nodes["/ab/A"]["props"].get("position", a), a)
+
+            # "play arms" ticked: the arms move by themselves
+            def moves() -> int:
+                return sum(c for n, c in client.pose_updates.items() if n.startswith("/ab/B/pred/"))
+            before = moves()
+            client.wait_until(lambda: moves() > before + 20, what="the arms playing")
+            tab = next(iter(app.ab_tabs.values()))
+            assert tab.arms is not None and tab.arms.n_steps > 10
+            step = tab.arms.n_steps - 3
+            assert client.control(client.find_control("step"))["props"]["max"] == tab.arms.n_steps - 1
+            # moving the step slider pauses play and holds the arms at that step
+            client.set_gui_value(client.find_control("step"), step)
+            client.wait_until(lambda: client.control(client.find_control("play arms"))["value"] is False,
+                              what="play unticked")
+            client.wait_until(lambda: tab.step == step, what="the slider's step")
+            held = moves()
+            assert not tab.playing.value and tab.step == step
+            tab.set_step(0)  # the arms go back to the start, and the slider with them
+            client.wait_until(lambda: moves() > held and client.control(client.find_control("step"))["value"] == 0,
+                              what="the arms and the slider at step 0")
+    finally:
+        app.stop()

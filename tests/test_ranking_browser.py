@@ -65,6 +65,10 @@ def test_blind_votes_by_keys_rank_the_planted_worse_checkpoint_last(tmp_path, br
         for side in ("A", "B"):  # each side's arm: six joint lines drawn
             lines = page.locator(f"[data-ab-joints='{side}'] svg.chart path.ln")
             assert lines.count() == 6 and lines.first.bounding_box()["width"] > 50
+        # each side's arms, predicted and GT (the demo has GT), in the page's 3D view
+        tab = wait_until(lambda: next(iter(app.ab_tabs.values()), None), what="the A/B tab")
+        assert tab.arms is not None and all(d is not None and d.q_gt is not None for d in tab.arms.data.values())
+        assert page.locator("canvas").first.bounding_box()["width"] > 200
         html = page.content()
         assert not [s for s in SECRETS if s in html], "a name reached the page before the vote"
         for k in range(1, VOTES + 1):

@@ -2,8 +2,10 @@
 
 Each tab shows two rollouts of different sessions (checkpoints) from the same start (the same tag,
 or the same episode, start frame and prompt) side by side: their imagined video, the real one
-where the rollout carries it, and the arm's predicted joints over time (one scale for both
-sides). The sides are shuffled and nothing that names a session (its name, model, metrics, the
+where the rollout carries it, the arm's predicted joints over time (one scale for both
+sides), and in the 3D scene each side's arms: predicted, and GT where there is one (see
+``._ab_arms``), posed at the pair's playback step (a step slider that plays, looping, at the
+rollouts' rate while "play arms" is ticked; moving the slider pauses it). The sides are shuffled and nothing that names a session (its name, model, metrics, the
 rollout's tag) is sent to the page until the vote is cast: in this mode the
 page holds no picker or overview at all. The evaluator answers A better, B better or tie (keys
 ``A``, ``B``, ``=``), optionally with a progress score [%] for each and a note; the vote is saved
@@ -35,9 +37,12 @@ from ..data.votes import Side, Vote, merged_votes, new_vote, save_vote
 from ..errors import InspectorError
 from ..report.svg import Axes, colour_class, legend_html
 from ..units import JOINT_NAMES
+from ._ab_arms import PairArms, rollout_scene
 from ._label_ids import LABEL_IDS_HTML
+from ._light_3d import LIGHT_3D_HINT, LIGHT_3D_HTML, LIGHT_3D_LABEL, apply_light_3d
 from ._overview_table import scoped_css
 from ._page_script import page_script_html
+from ._robot import SharedRobot
 
 ANSWER_BUTTONS = {"a": "A better", "tie": "Tie", "b": "B better"}
 # Keys -> the button they press (the page's script clicks it; viser's hotkeys know no "=").
@@ -62,6 +67,9 @@ AB_SCOPE = "ab-pair"
 CHART_CSS = scoped_css((resources.files("inspector.report") / "assets" / "chart.css").read_text(encoding="utf-8"),
                        AB_SCOPE)
 MAX_VIDEO_MB = 32.0  # a view larger than this is not inlined into the page
+# The arms' play loop: a few poses a second keep up with the videos' motion and leave a browser
+# drawing WebGL in software (four arms) time to answer the vote keys.
+PLAY_TICK_S = 0.1
 
 
 @dataclass(frozen=True)
@@ -194,12 +202,22 @@ def parse_progress(text: str) -> float | None:
 class ABTab:
     """One tab in A/B mode: the pair on show, the vote controls, the names of the last judged pair.
 
+    Args:
+        sessions: the served sessions (two or more).
+        client: the tab's viser client.
+        seed: of the pair order and the side shuffle (None: random).
+        robot: the shared robot for the arms (None: no meshes to draw).
+        joint_links: joint name -> child link, from the shared robot; None draws no 3D scene.
+
     Attributes:
         shown: the pair on show as ((session index, tag) of side A, of side B), or None.
         votes_cast: the votes this tab saved.
+        arms: the pair's arms (None without ``joint_links``).
+        step: the pair's playback step.
     """
 
-    def __init__(self, sessions: Sequence[Session], client, seed: int | None = None) -> None:
+    def __init__(self, sessions: Sequence[Session], client, seed: int | None = None,
+                 robot: SharedRobot | None = None, joint_links: dict[str, str] | None = None) -> None:
         self.sessions = list(sessions)
         self.client = client
         self.lock = threading.RLock()
@@ -208,12 +226,22 @@ class ABTab:
         self.rng = random.Random(seed)
         self.shown: tuple[tuple[int, str], tuple[int, str]] | None = None
         self.votes_cast: list[Vote] = []
+        self.joint_links = joint_links
+        self.arms: PairArms | None = None
+        self.step = 0
+        self._fps = 30.0
         gui = client.gui
         gui.configure_theme(control_width="large", show_share_button=False, brand_color=(230, 119, 0))
         with client.atomic():
-            gui.add_html("<div style='font-weight:600;font-size:0.95rem;padding:0 0.2rem'>Blind A/B comparison"
-                         f"{AB_KEYS_HTML}{LABEL_IDS_HTML}</div>")
+            # data-inspector-client: the Light 3D script ticks the box once per connection by it
+            gui.add_html(f"<div data-inspector-client='{int(client.client_id)}' "
+                         "style='font-weight:600;font-size:0.95rem;padding:0 0.2rem'>Blind A/B comparison"
+                         f"{AB_KEYS_HTML}{LABEL_IDS_HTML}{LIGHT_3D_HTML if joint_links is not None else ''}</div>")
             self.pair_html = gui.add_html("")
+            self.step_slider = gui.add_slider("step", 0, 1, 1, 0, hint="the arms' step (both sides)")
+            self.playing = gui.add_checkbox("play arms", True, hint="the arms play, looping, at the rollouts' rate")
+            self.light_3d = gui.add_checkbox(LIGHT_3D_LABEL, False, hint=LIGHT_3D_HINT)
+            self.step_slider.visible = self.playing.visible = self.light_3d.visible = joint_links is not None
             self.buttons = {answer: gui.add_button(label) for answer, label in ANSWER_BUTTONS.items()}
             gui.add_html("<div style='font-size:0.7rem;color:#6b7280;padding:0 0.2rem'>keys: A · B · = (tie)</div>")
             self.progress = {side: gui.add_text(f"progress {side.upper()} [%]", "", hint="optional, 0 to 100")
@@ -223,9 +251,49 @@ class ABTab:
             self.revealed = gui.add_html("")
             gui.main_panel.dock_left()
             gui.main_panel.set_width(900)
+            if joint_links is not None:
+                self.arms = PairArms(client, robot)
         for answer, button in self.buttons.items():
             button.on_click(lambda e, a=answer: self.vote(a) if e.client is not None else None)
+        self.step_slider.on_update(lambda e: self._slid(int(e.target.value)) if e.client is not None else None)
+        self.light_3d.on_update(lambda e: self._light_3d(bool(e.target.value)) if e.client is not None else None)
+        if self.light_3d.value:  # the page ticked it before the callback was there
+            self._light_3d(True)
         self.show_next()
+        if self.arms is not None:
+            threading.Thread(target=self._play, name="inspector-ab-arms", daemon=True).start()
+
+    def set_step(self, step: int) -> None:
+        """Pose the pair's arms at ``step`` (wrapped round the longer side's length)."""
+        with self.lock:
+            if self.arms is None or self.arms.n_steps == 0:
+                return
+            self.step = step % self.arms.n_steps
+            with self.client.atomic():
+                self.arms.set_step(self.step)
+                if int(self.step_slider.value) != self.step:
+                    self.step_slider.value = self.step
+
+    def _light_3d(self, light: bool) -> None:
+        """Plain lighting (see ``._light_3d``); ticked, by the page in a browser drawing WebGL in
+        software, it also stops the arms playing (four arms posed a few times a second there made
+        the vote keys wait seconds): the slider still poses them, and "play arms" can be ticked again."""
+        apply_light_3d(self.client, light)
+        if light:
+            self.playing.value = False
+
+    def _slid(self, step: int) -> None:
+        """The user moved the step slider: the arms hold there (play is unticked)."""
+        with self.lock:
+            self.playing.value = False
+            self.set_step(step)
+
+    def _play(self) -> None:
+        """While "play arms" is ticked, step the arms at the rollouts' rate until the tab closes."""
+        while not self.closed.wait(PLAY_TICK_S):
+            with self.lock:
+                if self.playing.value and not self.closed.is_set():
+                    self.set_step(self.step + max(1, round(self._fps * PLAY_TICK_S)))
 
     def show_next(self) -> None:
         """Put the least-compared pair on show."""
@@ -234,6 +302,8 @@ class ABTab:
             choice = choose_pair(self.candidates, self.sessions, votes, self.rng)
             if choice is None:
                 self.shown = None
+                if self.arms is not None:
+                    self.arms.show(None, None)
                 self.pair_html.content = ("<div style='color:#6b7280'>No two sessions share a start (the same tag, "
                                           "or the same episode, start frame and prompt): nothing to compare.</div>")
                 return
@@ -246,11 +316,22 @@ class ABTab:
                 y_range: tuple[float, float] | None = joint_ranges(ra, rb)
             except InspectorError:  # an array that cannot be read: the videos still compare
                 y_range = None
+            self._show_arms(ra, rb)
             self.pair_html.content = (
                 f"<div class='{AB_SCOPE}' data-ab-pair='{len(self.votes_cast) + 1}' style='padding:0 0.2rem'>"
                 f"<div style='font-size:0.85rem;margin-bottom:0.3rem'>task: {prompt}</div>"
                 f"<div style='display:flex;gap:0.5rem'>{side_html('A', ra, y_range)}{side_html('B', rb, y_range)}</div>"
                 f"<style>{CHART_CSS}</style></div>")
+
+    def _show_arms(self, ra: Rollout, rb: Rollout) -> None:
+        """Put the pair's arms up at step 0 (a side whose arrays cannot be read shows none)."""
+        if self.arms is None or self.joint_links is None:
+            return
+        self._fps = float(ra.fps or 30.0)
+        with self.client.atomic():
+            self.arms.show(rollout_scene(ra, self.joint_links), rollout_scene(rb, self.joint_links))
+            self.step_slider.max = max(self.arms.n_steps - 1, 1)
+            self.step_slider.value = self.step = 0
 
     def vote(self, answer: str, progress_a: float | None = None, progress_b: float | None = None,
              note: str | None = None) -> Vote | None:

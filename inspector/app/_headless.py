@@ -48,6 +48,10 @@ class HeadlessClient:
         self.received_bytes = 0
         self._observe = observe
         self._controls: dict[str, dict[str, Any]] = {}
+        # with observe: every scene node created (name -> its message type and props), and how many
+        # pose updates each node got
+        self.scene_nodes: dict[str, dict[str, Any]] = {}
+        self.pose_updates: dict[str, int] = {}
         self._changed = threading.Condition()
         self._stop = threading.Event()
         self._reader = threading.Thread(target=self._drain, name="headless-viser-client", daemon=True)
@@ -124,7 +128,7 @@ class HeadlessClient:
                 self._read_gui(msg)
 
     def _read_gui(self, raw: bytes) -> None:
-        """Keep the GUI messages of one window of viser's wire format: two little-endian sizes,
+        """Keep the GUI messages (and the scene nodes' names, props and pose update counts) of one window of viser's wire format: two little-endian sizes,
         the zstd-compressed msgpack of the messages, then raw binary buffers (not needed here)."""
         import zstandard
 
@@ -146,6 +150,10 @@ class HeadlessClient:
                             control["props"][key] = value
                 elif kind == "GuiRemoveMessage":
                     self._controls.pop(m.get("uuid"), None)
+                elif kind in ("SetOrientationMessage", "SetPositionMessage") and "name" in m:
+                    self.pose_updates[m["name"]] = self.pose_updates.get(m["name"], 0) + 1
+                elif "name" in m and "props" in m and not kind.startswith("Gui"):
+                    self.scene_nodes[m["name"]] = {"type": kind, "props": dict(m["props"])}
             self._changed.notify_all()
 
     def close(self) -> None:

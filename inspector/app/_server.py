@@ -66,7 +66,8 @@ class InspectorApp:
         self._robot: Future[SharedRobot] = loader.submit(_load_robot)
         loader.shutdown(wait=False)  # the one job still runs; the thread exits after it
         self.frame_cache = FrameCache(int(cache_mb * 2**20))
-        self.catalog = Catalog(sources, self._decoder, joint_child_links(), self.frame_cache,
+        self.joint_links = joint_child_links()
+        self.catalog = Catalog(sources, self._decoder, self.joint_links, self.frame_cache,
                                metrics_cache if metrics_cache is not None else MetricsCache(), self._matcher)
         # summary rows of every rollout for the overview, computed once when a tab first shows it
         self.overview_rows = OverviewRows(self.catalog)
@@ -94,7 +95,12 @@ class InspectorApp:
 
     def _connect(self, client) -> None:
         if self.ab:
-            ab_tab = ABTab(served_sessions(self.sources.sessions), client)
+            try:
+                robot: SharedRobot | None = self.robot()  # waits for the shared meshes on the first tab
+            except Exception:  # the pair still compares by its videos and joint plots
+                robot = None
+            ab_tab = ABTab(served_sessions(self.sources.sessions), client, robot=robot,
+                           joint_links=self.joint_links)
             with self._tabs_changed:
                 self.ab_tabs[client.client_id] = ab_tab
                 self._tabs_changed.notify_all()
