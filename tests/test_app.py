@@ -162,8 +162,18 @@ def test_seam_key_cycles_through_flagged_seams_and_the_card_lists_the_measures(a
         rows = dict(headline_metrics(tl))
         assert rows["chunk seams flagged"].startswith("12 · worst 20.")
         assert rows["completion"].startswith("never")
+        # the timeline (chunk slider) and the drift plot mark the flagged seam, there only
+        assert [(m.value, m.label) for m in tab.controls.chunk._marks] == [(12.0, "seam")]
+        drift = tab.plots.drift_plot
+        assert drift is not None and drift.handle.visible
+        series = [o["label"] for o in drift.handle.series]
+        seam_x = drift.handle.data[0][np.isfinite(drift.handle.data[series.index("seam flagged")])]
+        assert np.allclose(seam_x, tl.t_s[12 * tl.steps_per_chunk])
         assert tab.open(key(app, LIMITS))
         assert tab.jump_to_next_seam() == tab.step  # none flagged: stays
+        # no seam mark left over from the last rollout (this one completes: that is marked)
+        assert [m.label for m in tab.controls.chunk._marks or ()] == ["done"]
+        assert "seam flagged" not in [o["label"] for o in tab.plots.drift_plot.handle.series]
 
 
 def test_a_light_3d_page_gets_a_steps_frames_before_its_arms(app):
@@ -428,6 +438,16 @@ def test_cursor_plot_markers(app):
     assert np.isfinite(data[-2]).sum() == 2  # episode end line
     assert np.isfinite(data[-3]).sum() == 6  # two chunk ticks, three samples each
     assert np.isfinite(data[1]).all()  # the data line runs unbroken through every marker
+    plot.handle.remove()
+    # marks of one label are one series, one vertical line each, not joined to each other
+    plot = CursorPlot(app.server.gui, "t", x, [Line("a", np.sin(x), "#000")],
+                      marks=[(0.3, "seam", "#f00"), (1.2, "seam", "#f00"), (0.7, "done", "#0f0")])
+    labels = [o["label"] for o in plot.handle.series]
+    assert labels.count("seam") == 1 and labels.count("done") == 1
+    xs, seam = plot.handle.data[0], plot.handle.data[labels.index("seam")]
+    assert sorted(set(xs[np.isfinite(seam)])) == [0.3, 1.2] and np.isfinite(seam).sum() == 4
+    between = (xs > 0.3) & (xs < 1.2)
+    assert not np.isfinite(seam[between]).any()  # nothing drawn from one mark to the next
     plot.handle.remove()
 
 

@@ -395,3 +395,25 @@ def test_recording_carries_seams_completion_and_video_break(tmp_path):
         assert chunks.tolist() == [DEGRADE_FROM_CHUNK]
         _, curve = video.scalars(f"plots/video_degradation/{view}", order_by=CHUNK)
         assert len(curve) == 18 and curve[DEGRADE_FROM_CHUNK:].min() > 2
+
+
+def test_app_marks_completion_seams_and_video_breaks_where_the_report_finds_them():
+    """The app's timeline and drift plot marks (inspector.app._sanity_card.sanity_marks): the
+    planted early completion of ``early_wander`` and the video break of ``video_degrades``."""
+    from inspector.analysis.timeline import build_timeline
+    from inspector.app._sanity_card import sanity_marks, slider_marks
+    from inspector.data.session import load_session_rollout, read_session_with_gt
+
+    session = read_session_with_gt(DEMO, None)
+    wander = build_timeline(load_session_rollout(session, "early_wander"))
+    marks = sanity_marks(wander)
+    completes = [step for step, label, _ in marks if label == "completes"]
+    assert len(completes) == 1 and completes[0] / wander.fps == pytest.approx(11.87, abs=0.01)
+    assert not [m for m in marks if m[1] == "seam flagged"]
+    assert slider_marks(wander, marks) == ((int(wander.step_chunk[completes[0]]), "done"),)
+
+    degrades = build_timeline(load_session_rollout(session, "video_degrades"))
+    assert not [m for m in sanity_marks(degrades) if "video" in m[1]]  # no video metrics yet: no break known
+    degrades.video_metrics("front")
+    breaks = [(step, label) for step, label, _ in sanity_marks(degrades) if "video" in label]
+    assert breaks == [(int(degrades.chunk_start_step[DEGRADE_FROM_CHUNK]), "front video breaks")]

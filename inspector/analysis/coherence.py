@@ -35,7 +35,7 @@ def phase_offset(pred: npt.ArrayLike, gt: npt.ArrayLike, max_lag: int) -> int | 
 def phase_offsets(pred: npt.ArrayLike, gt: npt.ArrayLike, max_lag: int) -> list[int | None]:
     """Best lag [steps] of each joint of (T, J) predicted series against their GT.
 
-    Every lag and joint at once: the cross products from one ``np.correlate`` a joint, the
+    Every lag and joint at once: the cross products from one FFT cross-correlation, the
     windows' sums and squares from cumulative sums (a lag loop of ``np.corrcoef`` cost 60 ms a
     rollout). Among equally good lags the smallest (in magnitude) wins.
     """
@@ -47,7 +47,11 @@ def phase_offsets(pred: npt.ArrayLike, gt: npt.ArrayLike, max_lag: int) -> list[
     moving = vg.std(axis=1) >= MIN_MOTION
     max_lag = max(0, min(max_lag, n // 3))
     lags = np.array(sorted(range(-max_lag, max_lag + 1), key=lambda v: (abs(v), v)))
-    cross = np.stack([np.correlate(a, b, mode="full")[lags + n - 1] for a, b in zip(vp, vg)])  # sum vp[t] vg[t-lag]
+    # sum_t vp[t] vg[t - lag], every lag at once as a circular cross-correlation by FFT, long
+    # enough (2n) that no wanted lag wraps around (np.correlate per joint cost 4x as much)
+    size = 2 * n
+    spectrum = np.fft.rfft(vp, size) * np.conj(np.fft.rfft(vg, size))
+    cross = np.fft.irfft(spectrum, size)[:, lags % size]
     zero = np.zeros((vp.shape[0], 1))
     cp, cp2 = np.hstack([zero, np.cumsum(vp, axis=1)]), np.hstack([zero, np.cumsum(vp * vp, axis=1)])
     cg, cg2 = np.hstack([zero, np.cumsum(vg, axis=1)]), np.hstack([zero, np.cumsum(vg * vg, axis=1)])

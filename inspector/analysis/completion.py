@@ -13,6 +13,7 @@ included: a model that never says "done" wanders there).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TypedDict
 
 import numpy as np
@@ -69,47 +70,81 @@ class CompletionJson(TypedDict):
     hold_s: float
 
 
-def completion_record(pred: npt.ArrayLike, ee_pred: npt.ArrayLike, gt_episode: npt.ArrayLike,
-                      ee_of, offset: int, drift: npt.ArrayLike, fps: float,
+@dataclass(frozen=True)
+class CompletionTarget:
+    """The GT side of completion, the same for every rollout from one GT episode and start (so
+    computed once for them all: the GT's forward kinematics was half of completion's cost).
+
+    Attributes:
+        target: (6,) the GT episode's last frame; ee_target: (3,) its tool point [m].
+        away_deg: how far "away" from the target is; hold: the hold time [steps].
+        gt_step: the GT's own completion step (from the rollout's start), or None.
+        gt_len: GT frames from the rollout's start to the episode's end.
+    """
+
+    target: npt.NDArray[np.float64]
+    ee_target: npt.NDArray[np.float64]
+    away_deg: float
+    hold: int
+    gt_step: int | None
+    gt_len: int
+    tol_deg: float
+    tol_mm: float
+    hold_s: float
+
+
+def completion_target(gt_episode: npt.ArrayLike, ee_of, offset: int, fps: float,
                       tol_deg: float = COMPLETION_TOL_DEG, tol_mm: float = COMPLETION_TOL_MM,
-                      hold_s: float = COMPLETION_HOLD_S) -> CompletionJson:
+                      hold_s: float = COMPLETION_HOLD_S) -> CompletionTarget:
+    """The GT side of completion.
+
+    Args:
+        gt_episode: (G, 6) the whole GT episode; its last frame is the target.
+        ee_of: ``ee_of(q (n, 6)) -> (n, 3)`` tool points [m] (forward kinematics in these units).
+        offset: GT index of rollout step 0.
+    """
+    g = np.asarray(gt_episode, np.float64)
+    target = g[-1]
+    gt_part = g[offset:]
+    # one forward-kinematics pass over the GT and its target together
+    ee = np.asarray(ee_of(np.concatenate([gt_part, target[None]])), np.float64)
+    ee_target = ee[-1]
+    hold = int(round(hold_s * fps))
+    gt_dist = np.linalg.norm(gt_part - target, axis=-1)
+    away = AWAY_FRACTION * float(gt_dist.max()) if gt_dist.size else 0.0
+    gt_ee_mm = np.linalg.norm(ee[:-1] - ee_target, axis=-1) * 1000.0
+    gt_step = completion_step(gt_dist, gt_ee_mm, tol_deg, tol_mm, min(hold, len(gt_part)), away)
+    return CompletionTarget(target, ee_target, away, hold, gt_step, len(gt_part), tol_deg, tol_mm, hold_s)
+
+
+def completion_record(pred: npt.ArrayLike, ee_pred: npt.ArrayLike, gt: CompletionTarget,
+                      drift: npt.ArrayLike, fps: float) -> CompletionJson:
     """Completion of a rollout.
 
     Args:
         pred: (T, 6) executed predicted joints; ee_pred: (T, 3) their tool point [m].
-        gt_episode: (G, 6) the whole GT episode; its last frame is the target.
-        ee_of: ``ee_of(q (n, 6)) -> (n, 3)`` tool points [m] (forward kinematics in these units).
-        offset: GT index of rollout step 0.
+        gt: :func:`completion_target` of its GT episode and start.
         drift: (T,) time-aligned drift.
     """
     p = np.asarray(pred, np.float64)
-    g = np.asarray(gt_episode, np.float64)
-    target = g[-1]
-    ee_target = np.asarray(ee_of(target[None]), np.float64)[0]
-    hold = int(round(hold_s * fps))
-    dist = np.linalg.norm(p - target, axis=-1)
-    ee_mm = np.linalg.norm(np.asarray(ee_pred, np.float64) - ee_target, axis=-1) * 1000.0
-    gt_part = g[offset:]
-    gt_dist = np.linalg.norm(gt_part - target, axis=-1)
-    away = AWAY_FRACTION * float(gt_dist.max()) if gt_dist.size else 0.0
-    step = completion_step(dist, ee_mm, tol_deg, tol_mm, hold, away)
-    gt_ee_mm = np.linalg.norm(np.asarray(ee_of(gt_part), np.float64) - ee_target, axis=-1) * 1000.0
-    gt_step = completion_step(gt_dist, gt_ee_mm, tol_deg, tol_mm, min(hold, len(gt_part)), away)
+    dist = np.linalg.norm(p - gt.target, axis=-1)
+    ee_mm = np.linalg.norm(np.asarray(ee_pred, np.float64) - gt.ee_target, axis=-1) * 1000.0
+    step = completion_step(dist, ee_mm, gt.tol_deg, gt.tol_mm, gt.hold, gt.away_deg)
     d = np.asarray(drift, np.float64)
     before = d if step is None else d[:step]
     after = None if step is None else d[step:]
     time_s = None if step is None else step / fps
-    gt_time_s = None if gt_step is None else gt_step / fps
+    gt_time_s = None if gt.gt_step is None else gt.gt_step / fps
     tempo = None
     if time_s is not None and gt_time_s is not None and time_s > 0:
         tempo = round(gt_time_s / time_s, 4)
     early = bool(time_s is not None and gt_time_s is not None and time_s < (1 - EARLY_FRACTION) * gt_time_s)
     return {"time_s": _r(time_s), "step": step, "gt_time_s": _r(gt_time_s),
-            "gt_duration_s": round(len(gt_part) / fps, 4), "tempo": tempo, "early": early,
+            "gt_duration_s": round(gt.gt_len / fps, 4), "tempo": tempo, "early": early,
             "drift_before": _r(float(before.mean())) if before.size else None,
             "drift_after": _r(float(after.mean())) if after is not None and after.size else None,
             "max_after_deg": _r(float(dist[step:].max())) if step is not None else None,
-            "tol_deg": tol_deg, "tol_mm": tol_mm, "hold_s": hold_s}
+            "tol_deg": gt.tol_deg, "tol_mm": gt.tol_mm, "hold_s": gt.hold_s}
 
 
 def _r(v: float | None) -> float | None:

@@ -8,6 +8,7 @@ one only feeds them a timeline and shapes their records (for report rows, the ap
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any, TypedDict
 
 import numpy as np
@@ -16,7 +17,7 @@ import numpy.typing as npt
 from ..data.session import CHAINED_KINDS
 from ..robot.kinematics import kinematics
 from .coherence import CoherenceJson, coherence_record
-from .completion import CompletionJson, completion_record
+from .completion import CompletionJson, CompletionTarget, completion_record, completion_target
 from .seams import SeamsJson, jerk_p95, seam_jumps, seams_record
 from .timeline import RolloutTimeline
 from .video_break import VideoBreakJson, video_break_record
@@ -50,14 +51,12 @@ def sanity_measures(tl: RolloutTimeline, video: Mapping[str, VideoMetrics],
     seams = None
     if chained:
         s = seam_jumps(tl.chunks, tl.executed_per_chunk, tl.gt_aligned, inside)
-        gt_jerk = jerk_p95(tl.gt_aligned[inside], tl.fps) if tl.gt_aligned is not None else None
-        seams = seams_record(s, jerk_p95(tl.pred, tl.fps), gt_jerk)
+        seams = seams_record(s, jerk_p95(tl.pred, tl.fps), _gt_side(tl, inside).jerk_p95)
     completion = None
     if chained and tl.gt.actions is not None and tl.time_aligned_drift is not None:
-        units = tl.units
-        completion = completion_record(tl.pred, tl.ee_pred, tl.gt.actions,
-                                       lambda q: kinematics().gripper_positions(q, units), tl.gt.offset,
-                                       tl.time_aligned_drift, tl.fps)
+        target = _gt_side(tl, inside).completion
+        assert target is not None
+        completion = completion_record(tl.pred, tl.ee_pred, target, tl.time_aligned_drift, tl.fps)
     coherence = None
     if tl.gt_aligned is not None:
         coherence = coherence_record(tl.pred, tl.gt_aligned, inside, tl.fps)
@@ -72,6 +71,37 @@ def sanity_measures(tl: RolloutTimeline, video: Mapping[str, VideoMetrics],
             "video_break": {v: d["break_chunk"] for v, d in degradation.items()},
             "video_degradation": degradation,
             "latents": None if latents is None else {"n": int(latents.shape[0]), "dim": int(latents.shape[1])}}
+
+
+@dataclass
+class _GtSide:
+    """The measures' GT-only parts: the same for every rollout of a batch, whose timelines share
+    their GT arrays, so computed once for the batch. ``held`` keeps what they were computed from
+    alive (so that identity compares them safely)."""
+
+    held: tuple[Any, ...]  # compared by identity
+    scalars: tuple[Any, ...]  # compared by value
+    jerk_p95: float | None
+    completion: CompletionTarget | None
+
+
+_last_gt: _GtSide | None = None  # rollouts of one batch are measured one after another
+
+
+def _gt_side(tl: RolloutTimeline, inside: npt.NDArray[np.bool_]) -> _GtSide:
+    global _last_gt
+    held, scalars = (tl.gt.actions, tl.gt_aligned, tl.post_episode), (tl.gt.offset, tl.units, tl.fps)
+    last = _last_gt
+    if last is not None and all(a is b for a, b in zip(last.held, held)) and last.scalars == scalars:
+        return last
+    units = tl.units
+    jerk = jerk_p95(tl.gt_aligned[inside], tl.fps) if tl.gt_aligned is not None else None
+    target = None
+    if tl.gt.actions is not None:
+        target = completion_target(tl.gt.actions, lambda q: kinematics().gripper_positions(q, units),
+                                   tl.gt.offset, tl.fps)
+    _last_gt = _GtSide(held, scalars, jerk, target)
+    return _last_gt
 
 
 def aggregate_measures(rows: list[dict[str, Any]]) -> dict[str, Any]:

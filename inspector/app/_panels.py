@@ -21,7 +21,7 @@ from ._clip_clock import CLIP_CLOCK_HTML, CLIP_CLOCK_LABEL
 from ._keys import KEYS_HTML
 from ._label_ids import LABEL_IDS_HTML
 from ._light_3d import LIGHT_3D_HINT, LIGHT_3D_HTML, LIGHT_3D_LABEL
-from ._plots import CursorPlot, Line
+from ._plots import CursorPlot, Line, Mark
 from ._video_only import is_video_only, panel_note
 
 SPEEDS = ("0.25x", "0.5x", "1x", "2x", "4x")
@@ -118,6 +118,8 @@ class PlotPanel:
         self.plots: list[CursorPlot] = []
         self._handles: list = []
         self.joint_plot: CursorPlot | None = None
+        self.drift_plot: CursorPlot | None = None  # drift (or limits, without GT joints), with the sanity marks
+        self._sanity: tuple[tuple[int, str, str], ...] = ()
         self.psnr_plot: CursorPlot | None = None
         self.agreement_plot: CursorPlot | None = None
         # each view's video-action agreement, once its video metrics are known
@@ -134,15 +136,18 @@ class PlotPanel:
         for p in self.plots:
             p.handle.remove()
         self._handles, self.plots = [], []
-        self.joint_plot = self.psnr_plot = self.agreement_plot = None
+        self.joint_plot = self.psnr_plot = self.agreement_plot = self.drift_plot = None
         self.agreements, self._match_errors, self._frozen = {}, (), {}
         self._tl = None
 
     def build(self, tl: RolloutTimeline, compare: RolloutTimeline | None,
-              psnr: dict[str, np.ndarray | None], match_errors: dict[str, str] | None = None) -> None:
-        """(Re)create every plot for ``tl`` (and the compared rollout, if any)."""
+              psnr: dict[str, np.ndarray | None], match_errors: dict[str, str] | None = None,
+              sanity: Sequence[tuple[int, str, str]] = ()) -> None:
+        """(Re)create every plot for ``tl`` (and the compared rollout, if any); ``sanity``: the
+        ``(step, label, color)`` marks of :func:`._sanity_card.sanity_marks` on the drift plot."""
         self.clear()
         self._tl, self._cmp = tl, compare
+        self._sanity = tuple(sanity)
         gui, t, u = self._gui, tl.t_s, unit(tl)
         ticks = tl.t_s[tl.chunk_start_step[tl.chunk_start_step < tl.n_steps]]
         end = float(tl.episode_end_step / tl.fps) if tl.episode_end_step is not None else None
@@ -166,20 +171,20 @@ class PlotPanel:
             elif tl.has_gt_joints:
                 assert tl.time_aligned_drift is not None  # set with the GT joints
                 per_chunk = tl.per_chunk(tl.time_aligned_drift)[tl.step_chunk]
-                self._add(CursorPlot(gui, f"Joint drift [{u.strip() or 'units'}], L2 over 6 joints", t, [
+                self.drift_plot = self._add(CursorPlot(gui, f"Joint drift [{u.strip() or 'units'}], L2 over 6 joints", t, [
                     Line("time-aligned", tl.time_aligned_drift, LIMIT_HEX, 1.6),
                     *([Line("best-match", tl.best_match_drift, BM_HEX, 1.4)] if tl.best_match_drift is not None else []),
                     Line("time-aligned, chunk mean", per_chunk, LIMIT_HEX, 1.0, (4, 3)),
                     *([Line("DTW", tl.dtw_drift, DTW_HEX, 1.0, (2, 2))] if tl.dtw_drift is not None else []),
-                ], floor=0.0, **common))
+                ], floor=0.0, marks=self._marks_at(tl, sanity), **common))
             else:
                 self._handles.append(gui.add_html(
                     "<div style='font-size:0.8rem;color:#6b7280;padding:4px'>No GT joints for this "
                     "rollout, so no joint drift. Serve it with <code>--dataset</code> pointing at its "
                     "LeRobot dataset to compare joints. Shown: joints over their limits per step.</div>"))
-                self._add(CursorPlot(gui, "Joints past their URDF limit (count)", t, [
+                self.drift_plot = self._add(CursorPlot(gui, "Joints past their URDF limit (count)", t, [
                     Line("joints over limit", tl.limit_violation.sum(axis=1).astype(float), LIMIT_HEX)],
-                    floor=0.0, **common))
+                    floor=0.0, marks=self._marks_at(tl, sanity), **common))
             if compare is not None and not is_video_only(tl) and not is_video_only(compare):
                 per_step, per_chunk_div, collapse = prompt_divergence(tl.pred, compare.pred, tl.steps_per_chunk)
                 n = len(per_step)
@@ -211,6 +216,17 @@ class PlotPanel:
                 self.agreement_plot = self._add(CursorPlot(gui, self._agreement_title(), x, lines, marks=marks,
                                                            **common))
                 self.update_psnr(psnr, match_errors)  # a frame match that failed before: the title says so
+
+    @staticmethod
+    def _marks_at(tl: RolloutTimeline, sanity: Sequence[tuple[int, str, str]]) -> list[Mark]:
+        return [(float(tl.t_s[step]), label, color) for step, label, color in sanity]
+
+    def set_sanity_marks(self, sanity: Sequence[tuple[int, str, str]]) -> None:
+        """Redraw the drift plot's sanity marks when they change (a view's video break, once known)."""
+        if self._tl is None or self.drift_plot is None or tuple(sanity) == self._sanity:
+            return
+        self._sanity = tuple(sanity)
+        self.drift_plot.set_lines(self.drift_plot.lines, marks=self._marks_at(self._tl, sanity))
 
     def _add(self, plot: CursorPlot) -> CursorPlot:
         self.plots.append(plot)

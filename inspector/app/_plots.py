@@ -24,6 +24,9 @@ CURSOR_COLOR = "#111111"
 MARK_COLOR = "#495057"
 
 
+Mark = tuple[float, str] | tuple[float, str, str]  # (x, label[, color]) of a vertical line
+
+
 @dataclass
 class Line:
     """One data series. ``y``: (n,) values at the chart's x samples (NaN = no value)."""
@@ -58,14 +61,15 @@ class CursorPlot:
         lines: data series.
         ticks: x of chunk boundaries (short ticks along the bottom).
         end: x of the real episode's end (a dashed red line), or None.
-        marks: further vertical lines, ``(x, label)`` each (dashed, dark).
+        marks: further vertical lines, ``(x, label)`` (dashed, dark) or ``(x, label, color)``
+            each; marks of one label and color are one series (one legend entry).
         floor: pin the y axis bottom (0 for errors).
         height: chart height [px].
     """
 
     def __init__(self, gui, title: str, x: npt.ArrayLike, lines: Sequence[Line], *,
                  ticks: npt.ArrayLike = (), end: float | None = None, floor: float | None = None,
-                 height: int = 220, visible: bool = True, marks: Sequence[tuple[float, str]] = ()) -> None:
+                 height: int = 220, visible: bool = True, marks: Sequence[Mark] = ()) -> None:
         self._ticks = np.asarray(ticks, np.float64)
         self._end = end
         self._marks = list(marks)
@@ -80,6 +84,11 @@ class CursorPlot:
         )
 
     @property
+    def lines(self) -> list[Line]:
+        """The data series shown."""
+        return list(self._lines)
+
+    @property
     def visible(self) -> bool:
         return bool(self.handle.visible)
 
@@ -88,7 +97,7 @@ class CursorPlot:
         self.handle.visible = value
 
     def set_lines(self, lines: Sequence[Line], x: npt.ArrayLike | None = None, title: str | None = None,
-                  marks: Sequence[tuple[float, str]] | None = None) -> None:
+                  marks: Sequence[Mark] | None = None) -> None:
         """Replace the data series (e.g. another joint picked); markers (unless ``marks`` replaces
         the further ones) and cursor stay."""
         if marks is not None:
@@ -123,8 +132,12 @@ class CursorPlot:
         if self._end is not None:
             groups.append((np.array([self._end, self._end]), np.array([lo, hi]),
                            _series("episode end", END_COLOR, 1.5, (6, 4))))
-        for mark_x, label in self._marks:
-            groups.append((np.array([mark_x, mark_x]), np.array([lo, hi]), _series(label, MARK_COLOR, 1.5, (3, 3))))
+        by_series: dict[tuple[str, str], list[float]] = {}
+        for mark in self._marks:
+            by_series.setdefault((mark[1], mark[2] if len(mark) > 2 else MARK_COLOR), []).append(float(mark[0]))
+        for (label, color), xs in by_series.items():
+            # (x, lo), (x, hi), (x, NaN) per mark: the NaN keeps uPlot from joining one mark to the next
+            groups.append((np.repeat(xs, 3), np.tile([lo, hi, np.nan], len(xs)), _series(label, color, 1.5, (3, 3))))
         all_x = np.concatenate([x, *[g[0] for g in groups]])
         order = np.argsort(all_x, kind="stable")  # equal x keep their order: a tick reads lo, hi, lo
         self._X = all_x[order]

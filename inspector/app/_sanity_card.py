@@ -42,3 +42,35 @@ def flagged_seam_steps(tl: RolloutTimeline) -> list[int]:
     if seams is None:
         return []
     return [int(min(tl.chunk_start_step[k], tl.n_steps - 1)) for k in seams["flagged"]]
+
+
+SEAM_HEX = "#e8590c"
+COMPLETION_HEX = "#2b8a3e"
+VIDEO_BREAK_HEX = "#7048e8"
+
+
+def sanity_marks(tl: RolloutTimeline) -> list[tuple[int, str, str]]:
+    """``(step, label, color)`` where a flagged seam's chunk starts, the rollout completes and each
+    view's imagined video breaks (as far as the video metrics computed so far tell), by step: what
+    the timeline and the drift plot mark (the recording marks the same, see ..export.sanity_series)."""
+    m = sanity_measures(tl, tl.known_video_metrics())
+    last = tl.n_steps - 1
+    marks: list[tuple[int, str, str]] = []
+    if m["seams"] is not None:
+        marks += [(int(min(tl.chunk_start_step[k], last)), "seam flagged", SEAM_HEX) for k in m["seams"]["flagged"]]
+    c = m["completion"]
+    if c is not None and c["step"] is not None:
+        marks.append((int(min(c["step"], last)), "completes", COMPLETION_HEX))
+    for view, b in sorted(m["video_break"].items()):
+        if b is not None and b < tl.n_chunks:
+            marks.append((int(min(tl.chunk_start_step[b], last)), f"{view} video breaks", VIDEO_BREAK_HEX))
+    return sorted(marks)
+
+
+def slider_marks(tl: RolloutTimeline, marks: list[tuple[int, str, str]]) -> tuple[tuple[int, str], ...]:
+    """The chunk slider's marks: each mark's chunk and a short label (one per chunk, the first)."""
+    short = {"seam flagged": "seam", "completes": "done"}
+    by_chunk: dict[int, str] = {}
+    for step, label, _ in marks:
+        by_chunk.setdefault(int(tl.step_chunk[step]), short.get(label, "video"))
+    return tuple(sorted(by_chunk.items()))

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any, cast
 
 import numpy as np
+from viser._gui_api import _build_slider_marks  # what add_slider makes of its marks (see _set_slider_marks)
 
 from ..analysis.metrics import prompt_divergence
 from ..data.session import CHAINED_KINDS
@@ -47,7 +48,7 @@ from ._light_3d import apply_light_3d
 from ._overview import OverviewPanel
 from ._panels import NO_COMPARE, ControlPanel, PlotPanel, VideoPanel
 from ._playback_clip import CLIP_STEPS, encode_clip
-from ._sanity_card import flagged_seam_steps
+from ._sanity_card import flagged_seam_steps, sanity_marks, slider_marks
 from ._scene import TabScene
 from ._video_only import is_video_only
 
@@ -239,11 +240,32 @@ class TabState:
         # a video-only rollout has no arm to draw (nor does a video-only compared one)
         self.scene.show(None if is_video_only(tl) else loaded.scene,
                         cmp.scene if cmp is not None and not is_video_only(cmp.timeline) else None)
-        self.plots.build(tl, cmp.timeline if cmp is not None else None, loaded.frames.psnr, loaded.frames.match_errors)
+        marks = sanity_marks(tl)
+        self.plots.build(tl, cmp.timeline if cmp is not None else None, loaded.frames.psnr, loaded.frames.match_errors,
+                         sanity=marks)
+        self._set_slider_marks(marks)
         self._refresh_compare_info()
         if not keep_notes:
             self._load_notes()
             self.label.refresh()
+
+    def _set_slider_marks(self, marks: list[tuple[int, str, str]]) -> None:
+        """Flagged seams, completion and video breaks marked on the chunk slider. viser takes a
+        slider's marks as an argument when it adds the slider only; its ``_marks`` prop is what
+        that argument becomes, and assigning it sends the update like any other prop."""
+        loaded = self.loaded
+        assert loaded is not None
+        wanted = _build_slider_marks(slider_marks(loaded.timeline, marks)) or None
+        if self.controls.chunk._marks != wanted:
+            self.controls.chunk._marks = wanted
+
+    def _refresh_marks(self) -> None:
+        loaded = self.loaded
+        if loaded is None:
+            return
+        marks = sanity_marks(loaded.timeline)
+        self.plots.set_sanity_marks(marks)
+        self._set_slider_marks(marks)
 
     def _refresh_card(self) -> None:
         loaded = self.loaded
@@ -696,6 +718,7 @@ class TabState:
             with self.client.atomic():
                 self._render_video()
                 self.plots.update_psnr(self.loaded.frames.psnr, self.loaded.frames.match_errors)
+                self._refresh_marks()  # a view's video break, once its video metrics are known
                 self.plots.set_cursor(float(self.loaded.timeline.t_s[self.step]))
                 self._refresh_card()
 
