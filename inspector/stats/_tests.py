@@ -7,7 +7,6 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
-from scipy import stats as _scipy_stats
 from scipy.special import ndtri
 
 from ._intervals import z_quantile
@@ -39,21 +38,27 @@ def mcnemar_exact(a_only: int, b_only: int) -> TestResult:
     n = a_only + b_only
     if n == 0:
         return TestResult(1.0, "mcnemar_exact")
-    tail = float(_scipy_stats.binom.cdf(min(a_only, b_only), n, 0.5))
+    from scipy import stats  # imported when a test runs: scipy.stats costs seconds to import
+
+    tail = float(stats.binom.cdf(min(a_only, b_only), n, 0.5))
     return TestResult(min(1.0, 2.0 * tail), "mcnemar_exact")
 
 
 def fisher_exact(successes_a: int, n_a: int, successes_b: int, n_b: int) -> TestResult:
     """Fisher's exact test (two-sided) on two independent success counts."""
     table = [[successes_a, n_a - successes_a], [successes_b, n_b - successes_b]]
-    return TestResult(float(_scipy_stats.fisher_exact(table).pvalue), "fisher_exact")
+    from scipy import stats
+
+    return TestResult(float(stats.fisher_exact(table).pvalue), "fisher_exact")
 
 
 def barnard_exact(successes_a: int, n_a: int, successes_b: int, n_b: int) -> TestResult:
     """Barnard's unconditional exact test (two-sided): more power than Fisher's on small samples,
     at the price of a numerical search over the nuisance parameter."""
     table = [[successes_a, successes_b], [n_a - successes_a, n_b - successes_b]]
-    return TestResult(float(_scipy_stats.barnard_exact(table).pvalue), "barnard_exact")
+    from scipy import stats
+
+    return TestResult(float(stats.barnard_exact(table).pvalue), "barnard_exact")
 
 
 def rollouts_needed(rate_a: float, rate_b: float, *, confidence: float = 0.95,
