@@ -87,7 +87,12 @@ class CommandServer:
             self._proc.stdin.flush()
             pid = int(self._read())
             killed = threading.Event()
-            timer = threading.Timer(timeout, lambda: (killed.set(), os.kill(pid, signal.SIGKILL)))
+
+            def kill() -> None:
+                killed.set()
+                os.kill(pid, signal.SIGKILL)
+
+            timer = threading.Timer(timeout, kill)
             timer.start()
             try:
                 code = int(self._read())
