@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import pytest
+from cli_processes import CommandServer
 
 pytestmark = pytest.mark.slow  # the CLI as processes
 
@@ -17,9 +18,18 @@ REPO = Path(__file__).resolve().parents[1]
 DEMO = str(REPO / "sessions" / "demo")
 
 
-def inspector(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "inspector", *args], capture_output=True, text=True,
-                          timeout=timeout, cwd=REPO)
+@pytest.fixture(scope="module")
+def commands():
+    """Each refusal is its own process, forked from one that imported the CLI once."""
+    with CommandServer() as server:
+        yield server
+
+
+@pytest.fixture
+def inspector(commands):
+    def run(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+        return commands.run(*args, timeout=timeout, cwd=REPO)
+    return run
 
 
 def assert_one_line(out: subprocess.CompletedProcess, expected: str) -> None:
@@ -48,18 +58,18 @@ def assert_one_line(out: subprocess.CompletedProcess, expected: str) -> None:
     (("report", DEMO, "--no-such-flag"), "unrecognized arguments: --no-such-flag"),
     (("frobnicate",), "invalid choice: 'frobnicate'"),
 ])
-def test_a_bad_flag_is_one_line(args: tuple[str, ...], expected: str) -> None:
+def test_a_bad_flag_is_one_line(inspector, args: tuple[str, ...], expected: str) -> None:
     assert_one_line(inspector(*args), expected)
 
 
-def test_serve_refuses_a_host_that_does_not_resolve_within_seconds() -> None:
+def test_serve_refuses_a_host_that_does_not_resolve_within_seconds(inspector) -> None:
     start = time.monotonic()
     out = inspector("serve", "--host", "no.such.host.invalid", "--port", "0", timeout=60)
     assert_one_line(out, "error: --host: cannot resolve 'no.such.host.invalid'")
     assert time.monotonic() - start < 30  # 4 s of resolving at most, plus start-up on a busy machine
 
 
-def test_serve_refuses_a_port_in_use_within_seconds() -> None:
+def test_serve_refuses_a_port_in_use_within_seconds(inspector) -> None:
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
         taken.listen()
@@ -68,13 +78,30 @@ def test_serve_refuses_a_port_in_use_within_seconds() -> None:
     assert_one_line(out, f"error: --port: cannot listen on 127.0.0.1:{port} (")
 
 
-def test_serve_refuses_an_address_not_on_this_machine() -> None:
+def test_serve_refuses_an_address_not_on_this_machine(inspector) -> None:
     out = inspector("serve", "--host", "192.0.2.1", "--port", "0", timeout=60)  # TEST-NET-1: never local
     assert_one_line(out, "error: --port: cannot listen on 192.0.2.1:0 (")
 
 
-@pytest.mark.parametrize("command", [("report", DEMO, "--json"), ("export", DEMO, "-o", "{out}")])
-def test_jobs_past_the_cores_and_tasks_are_capped_in_one_note(tmp_path: Path, command: tuple[str, ...]) -> None:
+# Three short rollouts: more tasks than this machine's two cores, in seconds rather than the
+# whole demo's minute of exporting.
+FEW_ROLLOUTS = ("single_f000", "single_f076", "single_f153")
+
+
+@pytest.fixture(scope="module")
+def few_rollouts(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The bundled demo with only ``FEW_ROLLOUTS`` (read-only for tests)."""
+    import shutil
+
+    dest = tmp_path_factory.mktemp("few") / "demo"
+    shutil.copytree(DEMO, dest, ignore=lambda d, names: [n for n in names if Path(d).name == "rollouts"
+                                                         and n not in FEW_ROLLOUTS])
+    return dest
+
+
+@pytest.mark.parametrize("command", [("report", "{session}", "--json"), ("export", "{session}", "-o", "{out}")])
+def test_jobs_past_the_cores_and_tasks_are_capped_in_one_note(tmp_path: Path, few_rollouts: Path,
+                                                               command: tuple[str, ...]) -> None:
     """``--jobs 100000`` starts one worker per core (or per task, if fewer), never 100000 idle
     interpreters, and says so in one line; the command's output is as usual."""
     import os
@@ -82,7 +109,7 @@ def test_jobs_past_the_cores_and_tasks_are_capped_in_one_note(tmp_path: Path, co
 
     import psutil
 
-    args = [a.replace("{out}", str(tmp_path / "out")) for a in command]
+    args = [a.replace("{out}", str(tmp_path / "out")).replace("{session}", str(few_rollouts)) for a in command]
     with open(tmp_path / "stdout", "w") as stdout:
         proc = subprocess.Popen([sys.executable, "-m", "inspector", *args, "--jobs", "100000", "--no-cache"],
                                 stdout=stdout, stderr=subprocess.PIPE, text=True, cwd=REPO)

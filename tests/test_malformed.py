@@ -24,18 +24,17 @@ far outside the limits (1e30 still reports; only beyond ``ABSURD_VALUE`` = 1e100
 metrics' squared distances would overflow, is a value refused), a dataset that a session names but
 that is gone (the rollouts simply have no dataset GT), two source directories with the same name.
 
-Every CLI case runs ``python -m inspector`` in a subprocess with its own ``TMPDIR`` (which must be
-empty afterwards). The subprocesses of all cases run side by side from one module-scoped fixture:
-each pays a few seconds of torch / FK start-up, which would otherwise dominate the suite.
+Every CLI case runs ``inspector`` as a process of its own with its own ``TMPDIR`` (which must be
+empty afterwards), forked from a process that imported the CLI once (``cli_processes.py``); the
+cases run side by side from one module-scoped fixture.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import queue
 import shutil
-import subprocess
-import sys
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -44,12 +43,21 @@ from typing import Any
 
 import numpy as np
 import pytest
+from cli_processes import CommandServer
 
 from inspector.data.session import SessionWriter, open_session
 from inspector.errors import InspectorError
 from inspector.units import JOINT_NAMES
 
 pytestmark = pytest.mark.slow  # every malformed case run through the CLI as a process
+
+SIDE_BY_SIDE = 3  # cases running at once (their start-up is shared, so the cores are busy)
+# The report and export cases run their rollouts in the command's own process (``--jobs 1``):
+# spawning a pool of workers costs each case seconds of start-up, and what is malformed is found
+# the same way in either. These keep the default pool, so that errors raised in workers and
+# carried back to the command are covered too.
+IN_WORKERS = frozenset({"report-one-npy-truncated", "report-dataset-video-corrupt", "export-video-corrupt",
+                        "export-one-bad-of-three"})
 
 # ==============================================================================================
 # Mutation helpers
@@ -768,7 +776,7 @@ def ws(dz_layout: Path, lerobot_dir: Path, tmp_path_factory: pytest.TempPathFact
     return Workspace(tmp_path_factory.mktemp("malformed"), dz_layout, lerobot_dir)
 
 
-def _run_case(case: Case, ws: Workspace) -> Run:
+def _run_case(case: Case, ws: Workspace, commands: queue.Queue[CommandServer]) -> Run:
     d = ws.root / "cases" / case.id
     (d / "out").mkdir(parents=True)
     (d / "tmp").mkdir()
@@ -776,17 +784,31 @@ def _run_case(case: Case, ws: Workspace) -> Run:
         argv = [str(a) for a in case.build(ws, d)]
     except Exception as exc:  # a broken case, not a finding: report it on its own test
         return Run(case, d, -1, "", f"case setup failed: {type(exc).__name__}: {exc}")
+    if argv[0] in ("report", "export") and "--jobs" not in argv and case.id not in IN_WORKERS:
+        argv += ["--jobs", "1"]
     env = {**os.environ, "TMPDIR": str(d / "tmp")}
-    proc = subprocess.run([sys.executable, "-m", "inspector", *argv], capture_output=True, text=True,
-                          timeout=300, env=env, cwd=d, check=False)
+    server = commands.get()
+    try:
+        proc = server.run(*argv, timeout=300, env=env, cwd=d)
+    finally:
+        commands.put(server)
     return Run(case, d, proc.returncode, proc.stdout, proc.stderr)
 
 
 @pytest.fixture(scope="module")
 def runs(ws: Workspace) -> dict[str, Run]:
-    """Every CLI case, run side by side (the machine's cores are mostly idle while each starts)."""
-    with ThreadPoolExecutor(max_workers=6) as pool:
-        return dict(zip([c.id for c in CASES], pool.map(lambda c: _run_case(c, ws), CASES)))
+    """Every CLI case, run side by side, each in a process of its own forked from one of a few that
+    imported the CLI once (``cli_processes``)."""
+    servers = [CommandServer() for _ in range(SIDE_BY_SIDE)]
+    commands: queue.Queue[CommandServer] = queue.Queue()
+    for server in servers:
+        commands.put(server)
+    try:
+        with ThreadPoolExecutor(max_workers=SIDE_BY_SIDE) as pool:
+            return dict(zip([c.id for c in CASES], pool.map(lambda c: _run_case(c, ws, commands), CASES)))
+    finally:
+        for server in servers:
+            server.close()
 
 
 def test_cases_are_many_and_distinct():
