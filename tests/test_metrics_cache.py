@@ -93,7 +93,9 @@ def test_every_row_written_is_a_rollout_row_and_reads_back_as_written(warm_cache
     for path in entry_files(warm_cache):
         entry = read_back(path)
         assert entry is not None and mismatch(entry["row"], RolloutRow) is None
-        assert entry["row"] == rows[entry["row"]["tag"]]
+        # the report adds the outcomes after the cache (they change without the rollout changing)
+        reported = {k: v for k, v in rows[entry["row"]["tag"]].items() if k not in ("outcome_sources", "task_outcome")}
+        assert entry["row"] == reported
         assert set(entry["video"]) == {"front", "wrist"}
 
 

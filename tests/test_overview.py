@@ -240,11 +240,11 @@ def test_overview_lists_sorts_filters_draws_and_opens(browser, demo_pair_app):
     # shown by default (more than one rollout served): every rollout of both sessions
     assert page.locator(".inspector-overview table").first.is_visible()
     assert sorted(_table_keys(page)) == sorted(k for k, e in app.catalog.entries.items() if e.session)
-    assert len(_table_keys(page)) == 26
+    assert len(_table_keys(page)) == 34
 
     select_option(page, "Sort by", "RMSE")
     wait_until(lambda: _numbers(_cells(page, "rmse")) == sorted(_numbers(_cells(page, "rmse")))
-               and len(_numbers(_cells(page, "rmse"))) == 26, what="rows ordered by RMSE")
+               and len(_numbers(_cells(page, "rmse"))) == 34, what="rows ordered by RMSE")
     assert _table_keys(page)[-1].endswith("/ tempo_0.8x")  # the demo's largest RMSE: its slow rollout
 
     search = _text_field(page, "Search prompts")

@@ -176,7 +176,8 @@ def test_drift_figure_draws_every_rollout_and_marks_each_episode_end(demo_report
     for chart, metric in zip(charts, ["time_aligned_drift", "best_match_drift"]):
         by_key: dict[str, list] = {}
         for cls, key, x, y in _curves(chart):
-            by_key.setdefault(key, []).append((cls, x, y))
+            if key is not None:  # a rollout's curve (marks such as completion carry no key)
+                by_key.setdefault(key, []).append((cls, x, y))
         assert sorted(map(int, by_key)) == auto
         for key, parts in by_key.items():
             r = rows[int(key)]
@@ -322,7 +323,7 @@ def test_page_for_1000_rollouts_stays_small(demo_report):
     page = render_report_html(report)
     drift = _charts(_figure(page, "drift"))[0]
     assert len({key for _, key, _, _ in _curves(drift) if key is not None}) == 1000
-    assert len(page.encode()) < 2_000_000, len(page.encode())
+    assert len(page.encode()) < 3_000_000, len(page.encode())  # the sanity measures' columns included
 
 
 # ----------------------------------------------------------------------------------------------

@@ -524,7 +524,10 @@ def test_the_text_report_and_the_overview_say_frozen_and_no_match(demo_frozen: P
 
     out = _report([demo_frozen / "rollouts" / "frozen", demo_frozen / "rollouts" / "single_f384"])
     assert out.returncode == 0, out.stderr
-    lines = {line.split()[0]: line for line in out.stdout.splitlines() if line.strip()}
+    lines: dict[str, str] = {}
+    for line in out.stdout.splitlines():  # each rollout's first line: the drift table's (the sanity table follows)
+        if line.strip():
+            lines.setdefault(line.split()[0], line)
     assert lines["frozen"].count(" frozen") == 2  # the two lag columns
     assert lines["single_f384"].count("no match") == 2  # no frame of either view matches
 
