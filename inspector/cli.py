@@ -178,7 +178,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     check_listenable(args.host, args.port)
     serve(args.paths, host=args.host, port=args.port, share=args.share, dataset=args.dataset,
           cache_mb=args.cache_mb, use_cache=not args.no_cache, exit_when_stopped=True,
-          calibration=args.calibration, ab=args.ab)
+          calibration=args.calibration, ab=args.ab, outcome_source=args.outcome_source)
     return 0
 
 
@@ -187,7 +187,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
     return export_cli(args.path, args.output, rollout=args.rollout, views=args.views,
                       dataset=args.dataset, use_cache=not args.no_cache, limit_margin_deg=args.limit_margin,
-                      episodes=args.episode, ray=args.ray, jobs=args.jobs, calibration=args.calibration)
+                      episodes=args.episode, ray=args.ray, jobs=args.jobs, calibration=args.calibration,
+                      outcome_source=args.outcome_source)
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
@@ -414,8 +415,11 @@ def _resolve(host: str, port: int) -> tuple[int, tuple] | OSError:
 
 
 def _outcome_source_argument(p: argparse.ArgumentParser) -> None:
+    """``--outcome-source``: report, compare, serve and export read it the same way (the sources of
+    :data:`inspector.outcomes.SOURCES`, spelled out: the parser imports nothing heavy)."""
     p.add_argument("--outcome-source", choices=("label", "file", "sim", "recording"), default=None,
-                   help="the outcome tables use (default: a label over a file over sim/recording)")
+                   help="the one outcome source shown (tables, the app, a recording; a rollout without it has "
+                        "no outcome); default: a label over a file over sim/recording")
 
 
 def _import_parser(formats: Any, name: str, what: str, src_help: str,
@@ -543,6 +547,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "names hidden until the vote (keys A, B, =); votes go to each session's votes.json "
                         "for inspector rank")
     _calibration_argument(p)
+    _outcome_source_argument(p)
     p.set_defaults(func=_cmd_serve)
 
     p = sub.add_parser("export", help="write a Rerun .rrd recording")
@@ -560,6 +565,7 @@ def build_parser() -> argparse.ArgumentParser:
     _ray_argument(p, "write the recordings")
     _limit_margin_argument(p)
     _calibration_argument(p)
+    _outcome_source_argument(p)
     p.set_defaults(func=_cmd_export)
 
     p = sub.add_parser("eval", help="evaluate a served checkpoint against a LeRobot dataset, open loop "

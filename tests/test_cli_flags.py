@@ -54,6 +54,8 @@ def assert_one_line(out: subprocess.CompletedProcess, expected: str) -> None:
     (("serve", "--port", "70000"), "error: --port: must be a TCP port from 0 to 65535 (got 70000"),
     (("serve", "--port", "-5"), "error: --port: must be a TCP port from 0 to 65535 (got -5"),
     (("export", DEMO, "--episode", "x"), "error: --episode: must be a whole number"),
+    (("serve", "--outcome-source", "judge"), "error: --outcome-source: invalid choice: 'judge'"),
+    (("export", DEMO, "--outcome-source", "judge"), "error: --outcome-source: invalid choice: 'judge'"),
     (("report",), "error: inspector report: the following arguments are required: paths"),
     (("report", DEMO, "--no-such-flag"), "unrecognized arguments: --no-such-flag"),
     (("frobnicate",), "invalid choice: 'frobnicate'"),

@@ -759,3 +759,40 @@ def test_outcomes_travel_in_the_recording(synthetic_session, tmp_path):
         assert rec.scalars(PROGRESS_SERIES)[1].tolist() == [90.0, 90.0]
     finally:
         (synthetic_session / "outcomes.json").unlink()
+
+
+def test_export_outcome_source_chooses_the_recorded_outcome(tmp_path):
+    """``inspector export --outcome-source``: a lerobot-eval rollout the simulator calls a success
+    and a person labelled a failure at 30 % is recorded with the chosen source's success and
+    progress series (the text keeps both sources); a source the rollout lacks gives no series."""
+    from eval_outputs import write_eval
+
+    from inspector.data.sources import open_sources
+    from inspector.export.outcomes import OUTCOME, PROGRESS_SERIES, SUCCESS_SERIES
+    from inspector.outcomes import outcomes_path, store_records
+
+    raw = tmp_path / "eval_run"
+    write_eval(raw, {("so101_sim", 0): [True]}, steps=12)
+    sources = open_sources([raw], lazy=True)
+    try:
+        (tag,) = sources.sessions[0].tags()
+        store_records(outcomes_path(sources.sessions[0]), {tag: {"success": False, "progress": 30}},
+                      source="label", set_by="app")
+    finally:
+        sources.close()
+
+    def exported(source: str) -> Recording:
+        dest = tmp_path / f"{source}.rrd"
+        assert cli_main(["export", str(raw), "-o", str(dest), "--outcome-source", source, "--no-cache"]) == 0
+        rrd_verify(dest)
+        return Recording(dest)
+
+    by_sim, by_label, by_file = exported("sim"), exported("label"), exported("file")
+    assert "**success** (source: sim)" in by_sim.static(OUTCOME, "TextDocument:text")[0][0]
+    assert by_sim.scalars(SUCCESS_SERIES)[1].tolist() == [1.0, 1.0] and not by_sim.has(PROGRESS_SERIES)
+    text = by_label.static(OUTCOME, "TextDocument:text")[0][0]
+    assert "**failure** (source: label)" in text and "| sim | True |" in text
+    assert by_label.scalars(SUCCESS_SERIES)[1].tolist() == [0.0, 0.0]
+    assert by_label.scalars(PROGRESS_SERIES)[1].tolist() == [30.0, 30.0]
+    assert not by_file.has(SUCCESS_SERIES)
+    assert "| label | False | 30.0 |" in by_file.static(OUTCOME, "TextDocument:text")[0][0]

@@ -13,6 +13,8 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +22,8 @@ import pytest
 from browser import hide_software_webgl_notice, open_app, open_page, select_option, wait_until
 
 from inspector.app import serve
+from inspector.app._catalog import Catalog
+from inspector.app._overview_outcomes import row_outcomes
 from inspector.app._overview_rows import OverviewRow, OverviewRows
 from inspector.app._overview_table import (
     DELTA_RMSE,
@@ -27,6 +31,7 @@ from inspector.app._overview_table import (
     Query,
     compare_with_session,
     comparison_html,
+    effective_of,
     figures_html,
     outcome_filters,
     scoped_css,
@@ -34,8 +39,10 @@ from inspector.app._overview_table import (
     table_html,
 )
 from inspector.cache import MetricsCache
-from inspector.data.sources import BUNDLED_DEMO
-from inspector.outcomes import make_record
+from inspector.data.lerobot_writer import EpisodeData, write_lerobot_dataset
+from inspector.data.session import SessionWriter
+from inspector.data.sources import BUNDLED_DEMO, open_sources
+from inspector.outcomes import make_record, store_records
 
 DOCS_SCREENSHOT = Path(__file__).resolve().parents[1] / "docs" / "overview.png"
 OFFSET_DEG = 3.0
@@ -60,11 +67,9 @@ def _demo_copy(dest: Path, name: str, offset_tags=(), broken_tag: str | None = N
     return dest
 
 
-def _catalog(paths, cache: MetricsCache):
-    from inspector.app._catalog import Catalog
-    from inspector.data.sources import open_sources
-
-    return Catalog(open_sources(paths, confine=True, datasets=True), None, {}, metrics_cache=cache)
+def _catalog(paths, cache: MetricsCache, outcome_source: str | None = None) -> Catalog:
+    return Catalog(open_sources(paths, confine=True, datasets=True), None, {}, metrics_cache=cache,
+                   outcome_source=outcome_source)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -161,6 +166,54 @@ def test_outcome_filters_sorting_and_columns():
     verdicts = {t["metric"]: t["verdict"] for t in comparison.result["tests"]}
     assert verdicts["success"] == "A better" and verdicts["rmse_deg"] == "A better"
     assert "<b>A better</b> at 95%" in comparison_html(comparison)
+
+
+@pytest.mark.slow
+def test_row_outcomes_agree_with_report_and_follow_the_outcome_source(tmp_path):
+    """A session whose GT dataset records next.success: its rows show the recording's outcome where
+    no one labelled, a label over it, each as ``report --json`` has it; with ``--outcome-source``
+    (the catalog's) one source alone, and a row without it shows none (not a sim verdict instead)."""
+    rng = np.random.default_rng(1)
+    episodes = []
+    for success in (False, True, True):
+        joints = rng.normal(0, 10, size=(12, 6))
+        flags = np.zeros(12, bool)
+        flags[-1] = success
+        episodes.append(EpisodeData("Pick the red cube", joints, joints, {"front": np.zeros((12, 32, 48, 3), np.uint8)},
+                                    columns={"next.success": flags, "next.reward": flags.astype(np.float32)}))
+    dataset = write_lerobot_dataset(tmp_path / "ds", episodes, fps=10)
+    session = tmp_path / "s"
+    with SessionWriter.create(session, dataset=dataset) as w:
+        for i in range(3):
+            w.add_rollout(f"ep{i}", kind="single_chunk", actions=rng.normal(size=(1, 8, 6)), episode_index=i,
+                          executed_per_chunk=8)
+    store_records(session / "outcomes.json", {"ep1": {"success": False, "failure": "dropped"}}, source="label",
+                  set_by="app")
+    done = subprocess.run([sys.executable, "-m", "inspector", "report", str(session), "--json", "-j", "1",
+                           "--no-cache"], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    reported = {r["tag"]: r["task_outcome"] for r in json.loads(done.stdout)["rollouts"]}
+
+    def shown(outcome_source=None) -> dict:
+        catalog = _catalog([session], MetricsCache(tmp_path / "cache"), outcome_source)
+        try:
+            outcomes, error = row_outcomes(OverviewRows(catalog).rows(), catalog)
+        finally:
+            catalog.sources.close()
+        assert error is None
+        return {key.rsplit(" / ", 1)[1]: o for key, o in outcomes.items()}
+
+    overview = shown()
+    assert overview == reported
+    assert [(overview[t]["source"], overview[t]["success"]) for t in ("ep0", "ep1", "ep2")] == \
+        [("recording", False), ("label", False), ("recording", True)]
+    assert [o and o["success"] for o in shown("recording").values()] == [False, True, True]
+    only_labels = shown("label")
+    assert only_labels["ep0"] is None and only_labels["ep1"]["failure"] == "dropped"
+    sim_row = _row("a / r0", 1.0)
+    sim_row.summary["outcome"] = {"success": True}  # type: ignore[index]
+    assert effective_of(sim_row, {}) == make_record("sim", success=True, set_by="eval_info.json")
+    assert effective_of(sim_row, {"a / r0": Note(outcome_read=True)}) is None
 
 
 def test_compare_with_a_session_pairs_rows_and_counts_winners():

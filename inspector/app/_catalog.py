@@ -32,6 +32,7 @@ from ..errors import InspectorError, one_line
 from ..report.entries import read_entry, write_entry
 from ._frames import FrameCache, FrameStore
 from ._scene import RolloutScene
+from ._served_outcomes import ServedOutcomes
 
 # Built rollouts kept for reopening (the tabs hold on to the ones they show).
 KEEP_LOADED = 16
@@ -79,12 +80,18 @@ class Catalog:
         executor: pool for background video decoding.
         joint_links: joint name -> child link (for limit markers), from the shared robot.
         matcher: where rollouts' frame matches run, after their frames (default: ``executor``).
+        outcome_source: the outcome source the tables and the Label panel show
+            (``--outcome-source``; None: the precedence rule).
+
+    Attributes:
+        outcomes: the served rollouts' outcome sources (:class:`~._served_outcomes.ServedOutcomes`).
     """
 
     def __init__(self, sources: Sources, executor: Executor, joint_links: dict[str, str],
                  frame_cache: FrameCache | None = None, metrics_cache=None,
-                 matcher: Executor | None = None) -> None:
+                 matcher: Executor | None = None, outcome_source: str | None = None) -> None:
         self.sources = sources
+        self.outcomes = ServedOutcomes(outcome_source)
         self._executor = executor
         self._matcher = matcher
         self._joint_links = joint_links

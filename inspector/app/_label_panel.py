@@ -19,7 +19,7 @@ from html import escape
 from typing import Any
 
 from ..errors import InspectorError
-from ..outcomes import FAILURE_TAGS, effective_outcome, known_failure_tags, outcomes_path, read_outcomes, rollout_sources, says_something, update_outcome
+from ..outcomes import FAILURE_TAGS, known_failure_tags, outcomes_path, read_outcomes, says_something, update_outcome
 from ._cards import error_card
 from ._host import OverviewHost
 from ._keys import LABEL_HOTKEYS
@@ -74,13 +74,14 @@ class LabelPanel:
         tags = known_failure_tags(document)
         if tuple(self.failure.options) != (NO_TAG, *tags):
             self.failure.options = (NO_TAG, *tags)
-        sources = rollout_sources(entry.tag, session.rollouts.get(entry.tag), document["rollouts"], {})
+        served = self.tab.app.catalog.outcomes
+        sources = served.sources(session, entry.tag, document["rollouts"])
         label: dict[str, Any] = dict(sources.get("label") or {})
         self._record = label or None
         self._set_quietly(self.progress, int(round(label.get("progress") or 0)))
         self._set_quietly(self.failure, label.get("failure") or NO_TAG)
         self._set_quietly(self.note, label.get("note") or "")
-        shown = effective_outcome(sources)
+        shown = served.shown(sources)
         self.status.content = _status_html(shown, sources, self._queue_text(document))
 
     def _queue_keys(self) -> list[str]:

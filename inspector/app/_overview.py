@@ -164,7 +164,7 @@ class OverviewPanel:
             rows = self.store.rows()
             notes, notes_error = _notes(rows)
             outcomes, outcomes_error = row_outcomes(rows, self.tab.app.catalog)
-            notes = {k: replace(notes.get(k, Note()), outcome=outcomes.get(k))
+            notes = {k: replace(notes.get(k, Note()), outcome=outcomes.get(k), outcome_read=k in outcomes)
                      for k in {*notes, *outcomes}}
             notes_error = notes_error or outcomes_error
             q = self.query()

@@ -1,6 +1,7 @@
 """The Overview's outcomes: each row's effective outcome (a label, an imported file, a simulated
-evaluation's verdict), read at each redraw (one outcomes file per session), so a label made in any
-tab shows in every tab's table; and the success rates with their 95% Wilson intervals."""
+evaluation's verdict, the GT dataset's ``next.success``; or the ``--outcome-source`` alone), read
+at each redraw (one outcomes file per session), so a label made in any tab shows in every tab's
+table; and the success rates with their 95% Wilson intervals."""
 
 from __future__ import annotations
 
@@ -9,15 +10,16 @@ from html import escape
 from typing import Any
 
 from ..errors import InspectorError
-from ..outcomes import effective_outcome, outcomes_path, read_outcomes, rollout_sources
+from ..outcomes import outcomes_path, read_outcomes
 from ..report.outcomes import percent_interval, rate_record
 from ._overview_rows import OverviewRow
 
 
-def row_outcomes(rows: Sequence[OverviewRow], catalog: Any) -> tuple[dict[str, dict[str, Any]], InspectorError | None]:
-    """Catalog key -> effective outcome of each row with one (and the first unreadable file's error)."""
+def row_outcomes(rows: Sequence[OverviewRow], catalog: Any) -> tuple[dict[str, dict[str, Any] | None], InspectorError | None]:
+    """Catalog key -> effective outcome (None: none) of each row of a served session, as
+    ``catalog.outcomes`` picks it, and the first unreadable outcomes file's (or GT column's) error."""
     documents: dict[Any, Any] = {}
-    out: dict[str, dict[str, Any]] = {}
+    out: dict[str, dict[str, Any] | None] = {}
     error = None
     for r in rows:
         entry = catalog.get(r.key)
@@ -30,16 +32,15 @@ def row_outcomes(rows: Sequence[OverviewRow], catalog: Any) -> tuple[dict[str, d
             except InspectorError as exc:
                 error = error or exc
                 documents[path] = {}
-        sources = rollout_sources(r.tag, entry.session.rollouts.get(r.tag), documents[path], {})
-        shown = effective_outcome(sources)
-        if shown is not None:
-            out[r.key] = dict(shown)
+            error = error or catalog.outcomes.recorded(entry.session)[1]
+        shown = catalog.outcomes.shown(catalog.outcomes.sources(entry.session, r.tag, documents[path]))
+        out[r.key] = None if shown is None else dict(shown)
     return out, error
 
 
-def success_rate_html(shown: Sequence[OverviewRow], outcomes: Mapping[str, Mapping[str, Any]]) -> str:
+def success_rate_html(shown: Sequence[OverviewRow], outcomes: Mapping[str, Mapping[str, Any] | None]) -> str:
     """``success 12/20 (60%, 95% CI 39-78%) · 20 of 60 with an outcome`` over the rows shown."""
-    flags = [o["success"] for r in shown if (o := outcomes.get(r.key)) and o.get("success") is not None]
+    flags = [o["success"] for r in shown if (o := outcomes.get(r.key)) is not None and o.get("success") is not None]
     if not flags:
         return ""
     record = rate_record(sum(flags), len(flags))

@@ -110,6 +110,9 @@ class Note:
     flag: bool = False
     note: str = ""
     outcome: Mapping[str, Any] | None = None
+    # the outcome was read from every source (None then means none, not yet unread: a simulated
+    # evaluation's verdict is not put in its place, as ``--outcome-source label`` may leave it out)
+    outcome_read: bool = False
 
 
 @dataclass
@@ -164,7 +167,8 @@ def _matches(row: OverviewRow, q: Query, notes: Mapping[str, Note]) -> bool:
 
 def effective_of(row: OverviewRow, notes: Mapping[str, Note]) -> Mapping[str, Any] | None:
     """The row's effective outcome: as read with its notes, else its simulated evaluation's verdict."""
-    return notes.get(row.key, Note()).outcome or sim_record(outcome_of(row))
+    note = notes.get(row.key, Note())
+    return note.outcome if note.outcome_read else note.outcome or sim_record(outcome_of(row))
 
 
 def outcome_filters(notes: Mapping[str, Note]) -> list[str]:

@@ -40,6 +40,8 @@ class InspectorApp:
         metrics_cache: where video metrics are read and kept (default: the user's cache).
         ab: blind A/B mode: every tab compares pairs of sessions' rollouts (see ``._ab_mode``)
             instead of browsing them.
+        outcome_source: the outcome source the Overview and the Label panel show
+            (``--outcome-source``; None: a label over a file over sim/recording).
 
     Attributes:
         catalog: the served rollouts and their shared data.
@@ -50,7 +52,7 @@ class InspectorApp:
 
     def __init__(self, sources: Sources, host: str = "127.0.0.1", port: int = 8080,
                  cache_mb: float = DEFAULT_FRAME_CACHE_MB, metrics_cache: MetricsCache | None = None,
-                 ab: bool = False) -> None:
+                 ab: bool = False, outcome_source: str | None = None) -> None:
         import viser
 
         self.sources = sources
@@ -68,7 +70,8 @@ class InspectorApp:
         self.frame_cache = FrameCache(int(cache_mb * 2**20))
         self.joint_links = joint_child_links()
         self.catalog = Catalog(sources, self._decoder, self.joint_links, self.frame_cache,
-                               metrics_cache if metrics_cache is not None else MetricsCache(), self._matcher)
+                               metrics_cache if metrics_cache is not None else MetricsCache(), self._matcher,
+                               outcome_source=outcome_source)
         # summary rows of every rollout for the overview, computed once when a tab first shows it
         self.overview_rows = OverviewRows(self.catalog)
         self.server = viser.ViserServer(host=host, port=port, label="inspector", verbose=False)
@@ -160,7 +163,8 @@ def _load_robot() -> SharedRobot:
 def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", port: int = 8080,
           share: bool = False, dataset: str | Path | None = None, block: bool = True,
           cache_mb: float = DEFAULT_FRAME_CACHE_MB, use_cache: bool = True,
-          exit_when_stopped: bool = False, calibration: str | None = None, ab: bool = False) -> InspectorApp:
+          exit_when_stopped: bool = False, calibration: str | None = None, ab: bool = False,
+          outcome_source: str | None = None) -> InspectorApp:
     """Serve sessions in the browser (the bundled demo when ``paths`` is empty).
 
     Args:
@@ -179,6 +183,9 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
             many seconds on a busy machine.
         calibration: a GR00T-Dreams dump's calibration (``--calibration``; None: its default).
         ab: blind A/B comparison of the sessions (``--ab``; see ``._ab_mode``).
+        outcome_source: the outcome source the Overview's columns and the Label panel show
+            (``--outcome-source``: label, file, sim or recording; None: the precedence rule).
+            Labels made in the app are saved as source ``label`` either way.
 
     Returns:
         The :class:`InspectorApp` (``.port``, ``.url``, ``.stop()``, ``.tabs``).
@@ -203,7 +210,7 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
                                      f"(got {len(served_sessions(sources.sessions))})")
     try:
         app = InspectorApp(sources, host=host, port=port, cache_mb=cache_mb,
-                           metrics_cache=MetricsCache(enabled=use_cache), ab=ab)
+                           metrics_cache=MetricsCache(enabled=use_cache), ab=ab, outcome_source=outcome_source)
     except BaseException:  # Ctrl-C while starting included: drop temporary sessions
         sources.close()
         raise

@@ -684,7 +684,8 @@ class TabState:
             try:
                 with tempfile.TemporaryDirectory(prefix="inspector-export-") as tmp:
                     path = Path(tmp) / f"{tag}.rrd"
-                    write_recording(loaded.timeline, path, progress=progress)
+                    write_recording(loaded.timeline, path, progress=progress,
+                                    outcome_source=self.app.catalog.outcomes.prefer)
                     data = path.read_bytes()
                 self.client.send_file_download(f"{tag}.rrd", data, save_immediately=True)
                 note.title, note.body = "Exported", f"{tag}.rrd ({len(data) / 1e6:.1f} MB)"

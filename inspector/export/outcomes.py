@@ -49,12 +49,14 @@ def outcome_markdown(sources: Mapping[str, Any], shown: Mapping[str, Any] | None
     return "\n".join(lines) + "\n"
 
 
-def log_outcomes(rec: rr.RecordingStream, tl: RolloutTimeline, indexes_for: IndexesFor) -> bool:
-    """Log the outcome text and series; False when the rollout has no outcome."""
+def log_outcomes(rec: rr.RecordingStream, tl: RolloutTimeline, indexes_for: IndexesFor,
+                 outcome_source: str | None = None) -> bool:
+    """Log the outcome text (every source) and the series of the one shown: ``outcome_source``'s
+    (``--outcome-source``), else the precedence rule's. False when the rollout has no outcome."""
     sources = rollout_outcomes(tl)
     if not sources:
         return False
-    shown = effective_outcome(sources)
+    shown = effective_outcome(sources, outcome_source)
     rec.log(OUTCOME, rr.TextDocument(outcome_markdown(sources, shown), media_type="text/markdown"), static=True)
     if shown is not None:
         ends = np.array([0, max(tl.n_steps - 1, 0)])

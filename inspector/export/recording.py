@@ -55,7 +55,8 @@ _VIDEO_ASSETS = (0.85, 0.99)
 
 
 def write_recording(timeline: RolloutTimeline, path: str | Path, views: Sequence[str] | None = None,
-                    progress: Callable[[float, str], None] | None = None) -> Path:
+                    progress: Callable[[float, str], None] | None = None,
+                    outcome_source: str | None = None) -> Path:
     """Write ``timeline`` as a Rerun recording at ``path`` (atomically).
 
     Args:
@@ -63,6 +64,8 @@ def write_recording(timeline: RolloutTimeline, path: str | Path, views: Sequence
         path: the ``.rrd`` file to write; its directory is created if needed.
         views: camera views to include (default: every imagined and GT view).
         progress: ``progress(fraction, message)``, called as the export advances (0 -> 1).
+        outcome_source: the outcome source whose success and progress the series show
+            (``--outcome-source``; None: a label over a file over sim/recording).
 
     Returns:
         ``path``.
@@ -98,7 +101,7 @@ def write_recording(timeline: RolloutTimeline, path: str | Path, views: Sequence
         rec.send_blueprint(L.build_blueprint(contents), make_active=True, make_default=True)
         session = timeline.rollout.session
         rec.send_recording_name(f"{session.name}/{timeline.tag}" if session is not None else timeline.tag)
-        _log_recording(rec, timeline, views, psnr, report)
+        _log_recording(rec, timeline, views, psnr, report, outcome_source)
         data = stream.read() or b""
     except BaseException:
         # A failed recording is dropped by us: what was logged is taken out of the stream, so
@@ -151,7 +154,8 @@ def write_file_atomic(path: Path, data: bytes) -> None:
 
 
 def _log_recording(rec: rr.RecordingStream, tl: RolloutTimeline, views: list[str],
-                   psnr: dict[str, np.ndarray], report: Callable[[float, str], None]) -> None:
+                   psnr: dict[str, np.ndarray], report: Callable[[float, str], None],
+                   outcome_source: str | None = None) -> None:
     """Orchestrates the ``log_*`` functions; each takes the stream and the timeline."""
     def steps_indexes(steps: np.ndarray) -> list[rr.TimeColumn]:
         return L.step_indexes(tl, steps)
@@ -164,7 +168,7 @@ def _log_recording(rec: rr.RecordingStream, tl: RolloutTimeline, views: list[str
     agreements = {v: va for v in psnr if (va := tl.video_action(v)) is not None}
     rec.log(L.DESCRIPTION, rr.TextDocument(describe(tl, mean_psnr, agreements), media_type="text/markdown"),
             static=True)
-    log_outcomes(rec, tl, steps_indexes)  # did the task succeed, by each source's account
+    log_outcomes(rec, tl, steps_indexes, outcome_source)  # did the task succeed, by each source's account
     if tl.has_joints:  # a video-only rollout has no arm, no joint series
         log_arms(rec, tl, steps_indexes(np.arange(tl.n_steps)))
         report(0.80, "metric series")
@@ -229,13 +233,15 @@ def cached_video_metrics(tl: RolloutTimeline, cache) -> Iterator[None]:
 
 
 def export_rollout(rollout, dest: Path, views: Sequence[str] | None, limit_margin_deg: float, cache,
-                   progress: Callable[[float, str], None] | None = None) -> Path:
+                   progress: Callable[[float, str], None] | None = None,
+                   outcome_source: str | None = None) -> Path:
     """Write one rollout's recording at ``dest``: its timeline, with video metrics through
-    ``cache`` (:class:`inspector.cache.MetricsCache`); of ``views``, those it has (default: all)."""
+    ``cache`` (:class:`inspector.cache.MetricsCache`); of ``views``, those it has (default: all);
+    its outcome as ``outcome_source`` has it (None: the precedence rule)."""
     tl = build_timeline(rollout, limit_margin_deg=limit_margin_deg)
     rollout_views = None if views is None else [v for v in views if v in tl.rollout.views or v in tl.gt.views]
     with cached_video_metrics(tl, cache):
-        return write_recording(tl, dest, views=rollout_views, progress=progress)
+        return write_recording(tl, dest, views=rollout_views, progress=progress, outcome_source=outcome_source)
 
 
 def format_size(n_bytes: int) -> str:

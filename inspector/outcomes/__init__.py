@@ -52,6 +52,7 @@ from ._sources import SessionOutcomes as SessionOutcomes
 from ._sources import load_session_outcomes as load_session_outcomes
 from ._sources import recording_outcomes as recording_outcomes
 from ._sources import rollout_sources as rollout_sources
+from ._sources import session_recording_outcomes as session_recording_outcomes
 from ._sources import sim_record as sim_record
 from ._store import OUTCOMES_FILE as OUTCOMES_FILE
 from ._store import SIDECAR_SUFFIX as SIDECAR_SUFFIX
@@ -67,5 +68,5 @@ __all__ = [
     "FileRow", "ImportResult", "Imported", "import_outcomes", "OutcomeRecord", "OutcomesDocument", "SessionOutcomes", "Source",
     "check_fields", "effective_outcome", "known_failure_tags", "load_session_outcomes", "make_record",
     "match_rows", "outcomes_path", "read_outcome_file", "read_outcomes", "recording_outcomes",
-    "rollout_sources", "says_something", "sidecar_path", "sim_record", "store_records", "update_outcome",
+    "rollout_sources", "says_something", "session_recording_outcomes", "sidecar_path", "sim_record", "store_records", "update_outcome",
 ]

@@ -91,14 +91,25 @@ def load_session_outcomes(session: Session) -> SessionOutcomes:
     except InspectorError as exc:
         document, error = empty_document(), exc
     out = SessionOutcomes(path, document, error=error)
-    root = session.dataset_root
-    if root is not None and root.is_dir():
-        try:
-            from ..data.lerobot_dataset import open_dataset
-
-            out.recording = recording_outcomes(open_dataset(root))
-        except InspectorError as exc:
-            out.error = out.error or exc
+    try:
+        out.recording = session_recording_outcomes(session)
+    except InspectorError as exc:
+        out.error = out.error or exc
     return out
+
+
+def session_recording_outcomes(session: Session) -> dict[int, OutcomeRecord]:
+    """Per episode index, the ``recording`` record of the session's GT dataset (empty without one,
+    or when it has no ``next.success``).
+
+    Raises:
+        InspectorError: the dataset's column cannot be read.
+    """
+    root = session.dataset_root
+    if root is None or not root.is_dir():
+        return {}
+    from ..data.lerobot_dataset import open_dataset
+
+    return recording_outcomes(open_dataset(root))
 
 
