@@ -891,8 +891,8 @@ def _labelled_session(tmp: Path, name: str, n: int, labels: bool) -> Path:
 
 
 def bench_outcomes(tmp: Path, quick: bool) -> list[Figure]:
-    """``report`` of 1,000 labelled rollouts against the same rollouts unlabelled (one run, one
-    cache state); ``compare`` of two labelled sessions (the tests: bootstrap per metric, McNemar);
+    """``report`` and the app's Overview of 1,000 labelled rollouts against the same rollouts
+    unlabelled (one run, one cache state); ``compare`` of two labelled sessions (the tests: bootstrap per metric, McNemar);
     and the paired bootstrap's coverage of a known mean, by simulation."""
     from inspector.outcomes import store_records
     from inspector.stats import paired_bootstrap
@@ -915,6 +915,19 @@ def bench_outcomes(tmp: Path, quick: bool) -> list[Figure]:
     figures = [Figure(f"report_{n}_labelled", ours.wall_s, "s", "< 10 s and < 1 GB",
                       ours.wall_s < 10 and ours.peak_mib < 1024, ours.peak_mib, base.wall_s, base.peak_mib,
                       f"report_{n}'s rollouts with a label each; baseline: the same unlabelled, in the same run")]
+    # the Overview of the same rollouts, labelled vs not, each in a fresh `inspector serve`
+    unlabelled_s, unlabelled_mib = _overview_listed(many, n, labelled=False, env=fresh_cache(tmp))
+    store_records(many / "outcomes.json", labels, source="label", set_by="benchmark")
+    try:
+        overview_s, overview_mib = _overview_listed(many, n, labelled=True, env=fresh_cache(tmp))
+    finally:
+        (many / "outcomes.json").unlink()
+    figures.append(Figure(f"overview_{n}_labelled", overview_s, "s", "< 10 s and < 1 GB (report's)",
+                          overview_s < 10 and overview_mib < 1024, overview_mib, unlabelled_s, unlabelled_mib,
+                          f"`inspector serve` started to one tab's Overview listing report_{n}'s rollouts with "
+                          "metrics, each row's label in its outcome columns and the success rate with its "
+                          "interval; peak RSS of the server; cold cache; baseline: the same unlabelled, in "
+                          "the same run"))
     labelled = _labelled_session(tmp, "labelled", n, labels=True)
     other = _labelled_session(tmp, "labelled_b", n, labels=True)
     cmp = run_process(inspector_cmd("compare", labelled, other, "--json"), env=fresh_cache(tmp))
@@ -943,6 +956,37 @@ def bench_outcomes(tmp: Path, quick: bool) -> list[Figure]:
                                f"skewed (exponential): {coverage['exponential']:.1f} %; 10,000 resamples, "
                                f"{per_ci_ms:.1f} ms per interval"))
     return figures
+
+
+def _overview_listed(session: Path, n: int, labelled: bool, env: dict[str, str]) -> tuple[float, float]:
+    """Seconds from starting ``inspector serve session`` until a connected tab's Overview lists all
+    ``n`` rows with metrics (``labelled``: each with its label, and the success rate over them),
+    and the server's peak RSS [MiB] meanwhile."""
+    from inspector.app import HeadlessClient
+
+    def complete(client) -> bool:
+        head = client.html_containing("class='ov-head'")
+        if f"{n} with metrics" not in head or "computing" in head:
+            return False
+        if not labelled:
+            return True
+        table = client.html_containing("<tr data-key=")
+        return f"over the {n} shown row(s)" in head and table.count("data-col='source'>label") == n
+
+    start = time.perf_counter()
+    listed: list[float] = []
+    with _serve([str(session)], env) as (proc, port):
+        def watch() -> None:
+            with HeadlessClient(port, observe=True) as client:
+                client.wait_until(lambda: complete(client), timeout=900, what=f"the Overview's {n} rows")
+            listed.append(time.perf_counter() - start)
+
+        watcher = threading.Thread(target=watch, daemon=True)
+        watcher.start()
+        peak = _sample_peak_rss(proc, lambda: not watcher.is_alive(), 1200) / 2**20
+    if not listed:
+        raise RuntimeError("the Overview did not list every row")
+    return listed[0], peak
 
 
 def bench_label(tmp: Path, quick: bool) -> list[Figure]:
