@@ -963,6 +963,7 @@ def _overview_listed(session: Path, n: int, labelled: bool, env: dict[str, str])
     ``n`` rows with metrics (``labelled``: each with its label, and the success rate over them),
     and the server's peak RSS [MiB] meanwhile."""
     from inspector.app import HeadlessClient
+    from inspector.app._overview_table import MAX_TABLE_ROWS
 
     def complete(client) -> bool:
         head = client.html_containing("class='ov-head'")
@@ -971,7 +972,8 @@ def _overview_listed(session: Path, n: int, labelled: bool, env: dict[str, str])
         if not labelled:
             return True
         table = client.html_containing("<tr data-key=")
-        return f"over the {n} shown row(s)" in head and table.count("data-col='source'>label") == n
+        drawn = min(n, MAX_TABLE_ROWS)  # the table draws its first rows; the header counts them all
+        return f"over the {n} shown row(s)" in head and table.count("data-col='source'>label") == drawn
 
     start = time.perf_counter()
     listed: list[float] = []
