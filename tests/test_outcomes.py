@@ -25,6 +25,22 @@ def test_labels_are_merged_field_by_field_and_cleared(tmp_path: Path) -> None:
     assert read_outcomes(path)["rollouts"] == {}
 
 
+def test_a_file_changed_after_it_was_read_is_validated_again(tmp_path: Path) -> None:
+    """The store skips validating bytes it already found valid; bytes another process wrote are
+    checked again (a progress of 250 is refused, not served from what was read before)."""
+    path = tmp_path / "outcomes.json"
+    update_outcome(path, "ep0", {"success": True, "progress": 40})
+    first = read_outcomes(path)
+    assert json.loads(path.read_text()) == first  # one rollout a line is still plain JSON
+    assert len(path.read_text().splitlines()) == 7
+    path.write_text(path.read_text().replace("40.0", "250.0"))
+    with pytest.raises(InspectorError, match=r"rollouts\.ep0\.label\.progress"):
+        read_outcomes(path)
+    with pytest.raises(InspectorError, match="progress"):
+        update_outcome(path, "ep0", {"success": False})
+    assert "250.0" in path.read_text()  # never overwritten
+
+
 @pytest.mark.parametrize(("changes", "field"), [({"success": "yes"}, "success"), ({"progress": 250}, "progress"),
                                                  ({"failure": "exploded"}, "failure"), ({"sucess": True}, "sucess")])
 def test_bad_label_fields_are_refused_and_nothing_changes(tmp_path: Path, changes: dict, field: str) -> None:

@@ -81,8 +81,9 @@ class LabelPanel:
         self._set_quietly(self.progress, int(round(label.get("progress") or 0)))
         self._set_quietly(self.failure, label.get("failure") or NO_TAG)
         self._set_quietly(self.note, label.get("note") or "")
-        shown = served.shown(sources)
-        self.status.content = _status_html(shown, sources, self._queue_text(document))
+        status = _status_html(served.shown(sources), sources, self._queue_text())
+        if self.status.content != status:  # an unchanged panel costs the page nothing
+            self.status.content = status
 
     def _queue_keys(self) -> list[str]:
         """The rollouts the queue walks: the Overview's current rows (its filter and order) when it
@@ -111,7 +112,7 @@ class LabelPanel:
                 out.add(k)
         return out
 
-    def _queue_text(self, _document: Any = None) -> str:
+    def _queue_text(self) -> str:
         keys = self._queue_keys()
         return f"{len(self._labelled(keys))} of {len(keys)} labelled"
 

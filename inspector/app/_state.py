@@ -170,7 +170,7 @@ class TabState:
                 self._show_loaded()
                 self.step = -1
                 self._shown_chunk = None
-                self.set_step(0)
+                self.set_step(0, arms_now=True)
             return True
 
     def set_compare(self, key: str | None) -> bool:
@@ -297,7 +297,8 @@ class TabState:
     # ------------------------------------------------------------------------------------------
     # The scrub step
 
-    def set_step(self, step: int, force: bool = False, source=None, cursor: bool = True) -> int:
+    def set_step(self, step: int, force: bool = False, source=None, cursor: bool = True,
+                 arms_now: bool = False) -> int:
         """Move this tab to global step ``step`` (clamped): arms, trail, limits, video, plots, sliders.
 
         Args:
@@ -306,6 +307,8 @@ class TabState:
             source: the slider the user is moving, if any: it is not written back, so a drag whose
                 updates are handled out of order never snaps the thumb back.
             cursor: move the plot cursors too (playback skips some: they are most of the bytes).
+            arms_now: pose the arms in this batch even in Light 3D (a rollout that opens redraws
+                its scene anyway: posing them later would cost a second software-drawn frame).
 
         Returns:
             The step shown.
@@ -319,7 +322,7 @@ class TabState:
             if step == self.step and not force:
                 return step
             self.step = step
-            arms_later = not self.playing and bool(self.controls.light_3d.value)
+            arms_later = not (self.playing or arms_now) and bool(self.controls.light_3d.value)
             with self.client.atomic():
                 if not arms_later:
                     self.scene.set_step(step, self._limit_text(step))

@@ -257,13 +257,33 @@ def read_json(path: Path) -> Any:
         InspectorError: missing, not a regular file, unreadable, not UTF-8, not JSON, nested past
             the parser's depth, an integer past Python's digit limit, or a non-finite number.
     """
+    return parse_json(path, read_json_bytes(path))
+
+
+def read_json_bytes(path: Path) -> bytes:
+    """The bytes of a JSON file :func:`read_json` would parse (the same checks before reading).
+
+    Raises:
+        InspectorError: missing, not a regular file, too large or unreadable.
+    """
     if not path.is_file():
         raise InspectorError(path, "is a directory, not a file" if path.is_dir() else "file not found")
     check_json_size(path)
     try:
-        data = json.loads(path.read_bytes())
+        return path.read_bytes()
     except OSError as exc:
         raise InspectorError(path, f"cannot read ({exc.strerror or exc})") from None
+
+
+def parse_json(path: Path, raw: bytes) -> Any:
+    """:func:`read_json` of bytes already read from ``path`` (named in the errors).
+
+    Raises:
+        InspectorError: not UTF-8, not JSON, nested past the parser's depth, an integer past
+            Python's digit limit, or a non-finite number.
+    """
+    try:
+        data = json.loads(raw)
     except (ValueError, RecursionError) as exc:  # bad UTF-8, bad JSON, an int of 5000 digits, [[[[...
         raise InspectorError(path, f"invalid JSON ({type(exc).__name__}: {exc})") from None
     found = _first_non_finite(data)
@@ -667,12 +687,17 @@ def _type_names(kind: type | tuple[type, ...]) -> str:
 
 def write_json_atomic(path: Path, data: Any) -> None:
     """Write JSON so that the file is either the old one or the complete new one."""
+    write_bytes_atomic(path, (json.dumps(data, indent=2, allow_nan=False) + "\n").encode())
+
+
+def write_bytes_atomic(path: Path, raw: bytes) -> None:
+    """Write ``raw`` so that the file is either the old one or the complete new one (synced to
+    disk before it replaces the old one)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = mkstemp_sibling(path)  # as open() would create it, not mkstemp's 0600
     try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(data, fh, indent=2, allow_nan=False)
-            fh.write("\n")
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(raw)
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)

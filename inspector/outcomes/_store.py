@@ -4,13 +4,15 @@ atomic, and never overwriting a file that does not parse."""
 from __future__ import annotations
 
 import contextlib
+import json
 import os
+import threading
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
 from .._files import exclusive_lock
-from ..data.session import OUTCOMES_FILE, OUTCOMES_SIDECAR_SUFFIX, read_json, write_json_atomic
+from ..data.session import OUTCOMES_FILE, OUTCOMES_SIDECAR_SUFFIX, parse_json, read_json_bytes, write_bytes_atomic
 from ..errors import InspectorError
 from ..schema import mismatch, shown
 from ._record import (
@@ -33,6 +35,12 @@ if TYPE_CHECKING:
 
 SIDECAR_SUFFIX = OUTCOMES_SIDECAR_SUFFIX
 
+# The bytes of each outcomes file last found valid here (read or written), by path. A label is a
+# read-modify-write of the whole file and the app reads it again to show the label and the queue:
+# validating 1,000 records each time cost ~0.2 s a key press. Compared by content, so a file that
+# another process changed is validated again.
+_valid_bytes: dict[Path, bytes] = {}
+_valid_lock = threading.Lock()
 
 
 def sidecar_path(raw_dir: str | Path) -> Path:
@@ -70,13 +78,49 @@ def read_outcomes(path: str | Path) -> OutcomesDocument:
     if not os.path.lexists(path):
         return empty_document()
     try:
-        data = read_json(path)
+        raw = read_json_bytes(path)
+        with _valid_lock:
+            known_valid = _valid_bytes.get(path) == raw
+        if known_valid:
+            return cast(OutcomesDocument, _with_defaults(json.loads(raw)))
+        data = parse_json(path, raw)
         problem = _document_problem(data)
     except InspectorError as exc:
         raise InspectorError(path, f"{exc.what}; not overwriting it") from None
     if problem:
         raise InspectorError(path, f"{problem}; not overwriting it")
+    _remember_valid(path, raw)
     return cast(OutcomesDocument, data)
+
+
+def _with_defaults(data: dict[str, Any]) -> dict[str, Any]:
+    data.setdefault("failure_tags", [])
+    data.setdefault("rollouts", {})
+    return data
+
+
+def _remember_valid(path: Path, raw: bytes) -> None:
+    with _valid_lock:
+        _valid_bytes[path] = raw
+
+
+def _write(path: Path, document: OutcomesDocument) -> None:
+    """Replace the file with ``document`` (valid: read valid, then changed by checked fields)."""
+    raw = encode_document(document)
+    write_bytes_atomic(path, raw)
+    _remember_valid(path, raw)
+
+
+def encode_document(document: Mapping[str, Any]) -> bytes:
+    """The file's text: one rollout a line (easy to read and to diff), each line written by the
+    json module's C encoder (an indented document goes through its pure-Python one, ~20 times
+    slower: 0.1 s for 1,000 labelled rollouts)."""
+    head = [f"  {json.dumps(k)}: {json.dumps(v, allow_nan=False)}" for k, v in document.items() if k != "rollouts"]
+    rollouts = document.get("rollouts", {})
+    lines = ",\n".join(f"    {json.dumps(tag)}: {json.dumps(by_source, allow_nan=False)}"
+                        for tag, by_source in rollouts.items())
+    head.append('  "rollouts": {' + (f"\n{lines}\n  }}" if rollouts else "}"))
+    return ("{\n" + ",\n".join(head) + "\n}\n").encode()
 
 
 def _document_problem(data: Any) -> str | None:
@@ -155,7 +199,7 @@ def update_outcome(path: str | Path, tag: str, changes: Mapping[str, Any], *, so
             by_source[source] = cast(OutcomeRecord, record)
         if not by_source:
             document["rollouts"].pop(tag, None)
-        write_json_atomic(path, document)
+        _write(path, document)
         return kept
 
 
@@ -181,6 +225,6 @@ def store_records(path: str | Path, records: Mapping[str, Mapping[str, Any]], *,
             record = make_record(source, set_at=at, set_by=set_by)
             cast(dict[str, Any], record).update(check_fields(fields, known))
             document["rollouts"].setdefault(tag, {})[source] = record
-        write_json_atomic(path, document)
+        _write(path, document)
 
 
