@@ -195,7 +195,16 @@ def _close_pages_left_open(request: pytest.FixtureRequest):
 BROWSER_FIXTURES = frozenset({"browser", "playwright"})
 
 
-@pytest.hookimpl(tryfirst=True)  # before ``-m`` deselects by these marks
+def _worker_group(item: pytest.Item) -> str:
+    """The tests one pytest-xdist worker runs together (``--dist loadgroup``): every browser test
+    in one group, so that one Chromium draws at a time while the other worker runs commands; the
+    rest by module, so that a module's fixtures (a served app, a batch of CLI runs) are made once."""
+    if item.get_closest_marker("browser") is not None:
+        return "browser"
+    return item.nodeid.split("::", 1)[0]
+
+
+@pytest.hookimpl(tryfirst=True)  # before ``-m`` deselects by these marks; before xdist reads the groups
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Mark the tests that use the shared browser (``BROWSER_FIXTURES``) ``browser`` and ``slow``.
 
@@ -207,6 +216,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             for mark in ("browser", "slow"):
                 if item.get_closest_marker(mark) is None:
                     item.add_marker(getattr(pytest.mark, mark))
+        item.add_marker(pytest.mark.xdist_group(_worker_group(item)))
     if not config.pluginmanager.hasplugin("rerunfailures"):
         return
     for item in items:
