@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 import pytest
+import worker_groups
 from hypothesis import HealthCheck, settings
 
 # The suite runs on a shared 2-core machine: drawing an example may be slow because the machine
@@ -195,13 +196,14 @@ def _close_pages_left_open(request: pytest.FixtureRequest):
 BROWSER_FIXTURES = frozenset({"browser", "playwright"})
 
 
-def _worker_group(item: pytest.Item) -> str:
-    """The tests one pytest-xdist worker runs together (``--dist loadgroup``): every browser test
-    in one group, so that one Chromium draws at a time while the other worker runs commands; the
-    rest by module, so that a module's fixtures (a served app, a batch of CLI runs) are made once."""
-    if item.get_closest_marker("browser") is not None:
-        return "browser"
-    return item.nodeid.split("::", 1)[0]
+def pytest_configure(config: pytest.Config) -> None:
+    worker_groups.configure(config)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log):
+    """``--dist loadgroup`` (pyproject.toml's addopts) as ``worker_groups`` defines the groups."""
+    return worker_groups.make_scheduler(config, log) if config.getvalue("dist") == "loadgroup" else None
 
 
 @pytest.hookimpl(tryfirst=True)  # before ``-m`` deselects by these marks; before xdist reads the groups
@@ -216,7 +218,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             for mark in ("browser", "slow"):
                 if item.get_closest_marker(mark) is None:
                     item.add_marker(getattr(pytest.mark, mark))
-        item.add_marker(pytest.mark.xdist_group(_worker_group(item)))
+    worker_groups.record(config, items)
     if not config.pluginmanager.hasplugin("rerunfailures"):
         return
     for item in items:
