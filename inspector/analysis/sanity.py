@@ -18,6 +18,7 @@ from ..data.session import CHAINED_KINDS
 from ..robot.kinematics import kinematics
 from .coherence import CoherenceJson, coherence_record
 from .completion import CompletionJson, CompletionTarget, completion_record, completion_target
+from .measures_switch import sanity_measures_on
 from .seams import SeamsJson, jerk_p95, seam_jumps, seams_record
 from .timeline import RolloutTimeline
 from .video_break import VideoBreakJson, video_break_record
@@ -46,11 +47,16 @@ def sanity_measures(tl: RolloutTimeline, video: Mapping[str, VideoMetrics],
         video: its video metrics per view (their per-frame ``quality`` feeds the video break).
         imagined_quality: (F, 3) per-frame measures of views without GT video, measured apart.
     """
+    if not sanity_measures_on():
+        return {"seams": None, "completion": None, "joint_coherence": None, "video_break": {},
+                "video_degradation": {}, "latents": None}
+    settings = tl.measures
     chained = tl.kind in CHAINED_KINDS
     inside = ~tl.post_episode if tl.post_episode is not None else np.ones(tl.n_steps, bool)
     seams = None
     if chained:
-        s = seam_jumps(tl.chunks, tl.executed_per_chunk, tl.gt_aligned, inside)
+        s = seam_jumps(tl.chunks, tl.executed_per_chunk, tl.gt_aligned, inside, settings.seam_multiple,
+                       settings.seam_floor_deg)
         seams = seams_record(s, jerk_p95(tl.pred, tl.fps), _gt_side(tl, inside).jerk_p95)
     completion = None
     if chained and tl.gt.actions is not None and tl.time_aligned_drift is not None:
@@ -80,7 +86,7 @@ class _GtSide:
     alive (so that identity compares them safely)."""
 
     held: tuple[Any, ...]  # compared by identity
-    scalars: tuple[Any, ...]  # compared by value
+    scalars: tuple[Any, ...]  # compared by value (the settings among them)
     jerk_p95: float | None
     completion: CompletionTarget | None
 
@@ -90,7 +96,7 @@ _last_gt: _GtSide | None = None  # rollouts of one batch are measured one after 
 
 def _gt_side(tl: RolloutTimeline, inside: npt.NDArray[np.bool_]) -> _GtSide:
     global _last_gt
-    held, scalars = (tl.gt.actions, tl.gt_aligned, tl.post_episode), (tl.gt.offset, tl.units, tl.fps)
+    held, scalars = (tl.gt.actions, tl.gt_aligned, tl.post_episode), (tl.gt.offset, tl.units, tl.fps, tl.measures)
     last = _last_gt
     if last is not None and all(a is b for a, b in zip(last.held, held)) and last.scalars == scalars:
         return last
@@ -98,8 +104,10 @@ def _gt_side(tl: RolloutTimeline, inside: npt.NDArray[np.bool_]) -> _GtSide:
     jerk = jerk_p95(tl.gt_aligned[inside], tl.fps) if tl.gt_aligned is not None else None
     target = None
     if tl.gt.actions is not None:
+        m = tl.measures
         target = completion_target(tl.gt.actions, lambda q: kinematics().gripper_positions(q, units),
-                                   tl.gt.offset, tl.fps)
+                                   tl.gt.offset, tl.fps, m.completion_tol_deg, m.completion_tol_mm,
+                                   m.completion_hold_s)
     _last_gt = _GtSide(held, scalars, jerk, target)
     return _last_gt
 

@@ -10,6 +10,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from ..analysis.measure_settings import DEFAULT_MEASURES, MeasureSettings
 from ..analysis.timeline import build_timeline
 from ..cache import MetricsCache
 from ..data.episodes import episode_rollout
@@ -27,7 +28,8 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
                views: Sequence[str] | None = None, dataset: str | Path | None = None,
                use_cache: bool = True, limit_margin_deg: float | None = None,
                episodes: Sequence[int] | None = None, ray: str | None = None,
-               jobs: int | None = None, calibration: str | None = None) -> int:
+               jobs: int | None = None, calibration: str | None = None,
+               measures: MeasureSettings = DEFAULT_MEASURES) -> int:
     """``inspector export``: write one recording per rollout (or dataset episode); returns the exit code.
 
     Args:
@@ -45,6 +47,7 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
         jobs: worker processes writing several recordings (default: one per core); one rollout
             is written in this process.
         calibration: a GR00T-Dreams dump's calibration (``--calibration``; None: its default).
+        measures: the sanity measures' tolerances.
 
     Bad input prints ``error: <file>: <what>`` to stderr and returns 2; the other rollouts of a
     session are still exported when one of them is broken.
@@ -63,10 +66,11 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
             targets = _plan_outputs(sources, Path(path), Path(output), rollout, views)
             if ray is not None:
 
-                return 2 if export_on_ray(targets, ray, views, margin, use_cache) else 0
+                return 2 if export_on_ray(targets, ray, views, margin, use_cache, measures) else 0
             if len(targets) > 1:
 
-                failed = export_in_processes(targets, worker_count(jobs, len(targets)), views, margin, use_cache)
+                failed = export_in_processes(targets, worker_count(jobs, len(targets)), views, margin, use_cache,
+                                             measures)
                 return 2 if failed else 0
             for session, tag, dest in targets:
                 if tag in session.errors:
@@ -75,7 +79,7 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
                     continue
                 bar = FractionBar(tag)
                 try:
-                    export_rollout(session.rollouts[tag], dest, views, margin, cache, progress=bar)
+                    export_rollout(session.rollouts[tag], dest, views, margin, cache, progress=bar, measures=measures)
                 except InspectorError as exc:
                     bar.close()
                     _print_error(exc)
