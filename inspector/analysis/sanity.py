@@ -19,7 +19,7 @@ from ..robot.kinematics import kinematics
 from .coherence import CoherenceJson, coherence_record
 from .completion import CompletionJson, CompletionTarget, completion_record, completion_target
 from .measures_switch import sanity_measures_on
-from .seams import SeamsJson, jerk_p95, seam_jumps, seams_record
+from .seams import Seams, SeamsJson, jerk_p95, seam_jumps, seams_record
 from .timeline import RolloutTimeline
 from .video_break import VideoBreakJson, video_break_record
 from .video_metrics import VideoMetrics
@@ -50,13 +50,11 @@ def sanity_measures(tl: RolloutTimeline, video: Mapping[str, VideoMetrics],
     if not sanity_measures_on():
         return {"seams": None, "completion": None, "joint_coherence": None, "video_break": {},
                 "video_degradation": {}, "latents": None}
-    settings = tl.measures
     chained = tl.kind in CHAINED_KINDS
     inside = ~tl.post_episode if tl.post_episode is not None else np.ones(tl.n_steps, bool)
     seams = None
-    if chained:
-        s = seam_jumps(tl.chunks, tl.executed_per_chunk, tl.gt_aligned, inside, settings.seam_multiple,
-                       settings.seam_floor_deg)
+    s = rollout_seams(tl)
+    if s is not None:
         seams = seams_record(s, jerk_p95(tl.pred, tl.fps), _gt_side(tl, inside).jerk_p95)
     completion = None
     if chained and tl.gt.actions is not None and tl.time_aligned_drift is not None:
@@ -77,6 +75,15 @@ def sanity_measures(tl: RolloutTimeline, video: Mapping[str, VideoMetrics],
             "video_break": {v: d["break_chunk"] for v, d in degradation.items()},
             "video_degradation": degradation,
             "latents": None if latents is None else {"n": int(latents.shape[0]), "dim": int(latents.shape[1])}}
+
+
+def rollout_seams(tl: RolloutTimeline) -> Seams | None:
+    """Every chunk seam of a chained rollout (None for others), flagged with its tolerances."""
+    if tl.kind not in CHAINED_KINDS:
+        return None
+    inside = ~tl.post_episode if tl.post_episode is not None else np.ones(tl.n_steps, bool)
+    return seam_jumps(tl.chunks, tl.executed_per_chunk, tl.gt_aligned, inside, tl.measures.seam_multiple,
+                      tl.measures.seam_floor_deg)
 
 
 @dataclass

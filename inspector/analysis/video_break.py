@@ -129,8 +129,8 @@ class VideoBreakJson(TypedDict):
     """A view's degradation curve and break chunk, as the report writes it."""
 
     break_chunk: int | None
-    degradation: list[float | None]  # per chunk, 1 = as the first chunk
-    measures: dict[str, list[float | None]]  # per chunk: sharpness, noise, flicker (medians)
+    degradation: list[float | None]  # per chunk, 1 = as the first chunk (the per-chunk measures
+    # behind it stay out of report rows: three more lists per view and rollout)
 
 
 def degradation(quality: npt.ArrayLike, frames_per_chunk: int) -> tuple[Array, Array]:
@@ -180,11 +180,9 @@ def break_chunk(curve: npt.ArrayLike, ratio: float = BREAK_RATIO) -> int | None:
 
 def video_break_record(quality: npt.ArrayLike, frames_per_chunk: int, ratio: float = BREAK_RATIO) -> VideoBreakJson:
     """A view's ``video_break`` entry from its per-frame measures."""
-    per_chunk, curve = degradation(quality, frames_per_chunk)
-    return {"break_chunk": break_chunk(curve, ratio),
-            "degradation": [_round(v) for v in curve],
-            "measures": {name: [_round(v) for v in per_chunk[:, m]] for m, name in enumerate(QUALITY_MEASURES)}}
+    _, curve = degradation(quality, frames_per_chunk)
+    return {"break_chunk": break_chunk(curve, ratio), "degradation": [_round(v, 3) for v in curve]}
 
 
-def _round(v: float) -> float | None:
-    return round(float(v), 4) if np.isfinite(v) else None
+def _round(v: float, digits: int = 4) -> float | None:
+    return round(float(v), digits) if np.isfinite(v) else None
