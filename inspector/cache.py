@@ -102,7 +102,7 @@ def _file_state(path: Path) -> list[Any]:
         return [str(path), None, None]
 
 
-def rollout_key(rollout, gt, limit_margin_deg: float, measures=None) -> str:
+def rollout_key(rollout, gt, limit_margin_deg: float, measures) -> str:
     """The cache key of a rollout's metrics (see the module docstring).
 
     Args:
@@ -110,7 +110,7 @@ def rollout_key(rollout, gt, limit_margin_deg: float, measures=None) -> str:
         gt: its :class:`inspector.data.ground_truth.GroundTruth`.
         limit_margin_deg: the joint-limit margin the numbers were computed with [deg].
         measures: the :class:`inspector.analysis.measure_settings.MeasureSettings` they were
-            computed with (default: the documented defaults).
+            computed with (its ``cache_key()``).
     """
     root = Path(rollout.root).resolve()
     files = sorted(p for p in root.rglob("*") if p.is_file())
@@ -131,15 +131,9 @@ def rollout_key(rollout, gt, limit_margin_deg: float, measures=None) -> str:
                "files": [_file_state(Path(p)) for p in gt.files],
                "clips": clips},
         "limit_margin_deg": float(limit_margin_deg),
-        "measures": (measures or _default_measures()).cache_key(),
+        "measures": measures.cache_key(),
     }
     return hashlib.sha256(json.dumps(state, sort_keys=True, default=str).encode()).hexdigest()
-
-
-def _default_measures():
-    from .analysis.measure_settings import DEFAULT_MEASURES
-
-    return DEFAULT_MEASURES
 
 
 def record_import_sources(session, source: str | Path, dataset: str | Path | None = None) -> None:
