@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy.spatial.distance import pdist, squareform
 
-from inspector.analysis.coherence import coherence_record, coupling_error, phase_offset
+from inspector.analysis.coherence import coherence_record, coupling_error, gt_motion, phase_offset, phase_offsets
 from inspector.analysis.completion import completion_step
 from inspector.analysis.latents import pca_2d, silhouette
 from inspector.analysis.seams import jerk, seam_jumps
@@ -126,6 +126,8 @@ def test_phase_offset_is_the_lag_of_the_best_pearson_correlation():
         best = max(scores.values())
         expected = min((lag for lag, r in scores.items() if r >= best - 1e-12), key=lambda v: (abs(v), v))
         assert phase_offset(pred, gt, max_lag=30) == expected
+        # the GT side computed once for a batch gives the same lag
+        assert phase_offsets(pred[:, None], gt_motion(gt[:, None]), 30) == [expected]
 
 
 def _silhouette_by_definition(x: np.ndarray, labels: list[int]) -> float:

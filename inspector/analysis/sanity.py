@@ -16,7 +16,7 @@ import numpy.typing as npt
 
 from ..data.session import CHAINED_KINDS
 from ..robot.kinematics import kinematics
-from .coherence import CoherenceJson, coherence_record
+from .coherence import CoherenceJson, GtMotion, coherence_record, gt_motion
 from .completion import CompletionJson, CompletionTarget, completion_record, completion_target
 from .measures_switch import sanity_measures_on
 from .seams import Seams, SeamsJson, jerk_p95, seam_jumps, seams_record
@@ -63,7 +63,7 @@ def sanity_measures(tl: RolloutTimeline, video: Mapping[str, VideoMetrics],
         completion = completion_record(tl.pred, tl.ee_pred, target, tl.time_aligned_drift, tl.fps)
     coherence = None
     if tl.gt_aligned is not None:
-        coherence = coherence_record(tl.pred, tl.gt_aligned, inside, tl.fps)
+        coherence = coherence_record(tl.pred, tl.gt_aligned, inside, tl.fps, _gt_side(tl, inside).motion)
     degradation: dict[str, VideoBreakJson] = {}
     if chained:
         per_view = {v: vm.quality for v, vm in video.items() if vm.quality is not None}
@@ -96,6 +96,7 @@ class _GtSide:
     scalars: tuple[Any, ...]  # compared by value (the settings among them)
     jerk_p95: float | None
     completion: CompletionTarget | None
+    motion: GtMotion | None  # the GT's velocities, for every rollout's phase offsets
 
 
 _last_gt: _GtSide | None = None  # rollouts of one batch are measured one after another
@@ -115,7 +116,8 @@ def _gt_side(tl: RolloutTimeline, inside: npt.NDArray[np.bool_]) -> _GtSide:
         target = completion_target(tl.gt.actions, lambda q: kinematics().gripper_positions(q, units),
                                    tl.gt.offset, tl.fps, m.completion_tol_deg, m.completion_tol_mm,
                                    m.completion_hold_s)
-    _last_gt = _GtSide(held, scalars, jerk, target)
+    motion = gt_motion(tl.gt_aligned[inside]) if tl.gt_aligned is not None else None
+    _last_gt = _GtSide(held, scalars, jerk, target, motion)
     return _last_gt
 
 
