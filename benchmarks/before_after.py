@@ -126,7 +126,8 @@ def main(argv: list[str] | None = None) -> int:
         after_tree = export_tree(after_rev, tmp / "after") if after_rev else REPO
         envs: dict[str, dict[str, str]] = {"before": {}, "after": {}}
         if args.without_sanity:
-            trees, label = {"before": after_tree, "after": after_tree}, "the same code without the sanity measures"
+            trees = {"before": after_tree, "after": after_tree}
+            label = f"{after_rev[:7] if after_rev else 'the working tree'} without the sanity measures"
             envs["before"] = {"INSPECTOR_SANITY_MEASURES": "off"}
         else:
             trees, label = {"before": export_tree(args.before, tmp / "before"), "after": after_tree}, args.before
