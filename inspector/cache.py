@@ -4,7 +4,8 @@ exporting it) does not decode its videos again.
 Entries live in the user's cache directory (``$INSPECTOR_CACHE_DIR``, else
 ``$XDG_CACHE_HOME/inspector``, else ``~/.cache/inspector``), never in the session, so read-only
 sessions work. An entry's key covers everything its numbers depend on: every file of the rollout
-and of its GT (path, size, modification time), the joint-limit margin, and the code that computes
+and of its GT (path, size, modification time), the joint-limit margin, the sanity measures'
+tolerances (completion's, the seam flag's), and the code that computes
 them (the package version and the metric modules' source), so a changed input or a new release
 never reads a stale entry.
 
@@ -62,7 +63,7 @@ _METRIC_MODULES = ("analysis/metrics.py", "analysis/sweep.py", "analysis/video_m
                    "robot/kinematics.py", "units.py", "data/ground_truth.py", "report/rows.py", "data/video.py",
                    "report/tasks.py",  # tasks.py: which rollouts get SSIM
                    "analysis/seams.py", "analysis/completion.py", "analysis/coherence.py",
-                   "analysis/video_break.py", "analysis/sanity.py")
+                   "analysis/video_break.py", "analysis/sanity.py", "analysis/measure_settings.py")
 
 
 def default_dir() -> Path:
@@ -101,13 +102,15 @@ def _file_state(path: Path) -> list[Any]:
         return [str(path), None, None]
 
 
-def rollout_key(rollout, gt, limit_margin_deg: float) -> str:
+def rollout_key(rollout, gt, limit_margin_deg: float, measures) -> str:
     """The cache key of a rollout's metrics (see the module docstring).
 
     Args:
         rollout: a :class:`inspector.data.session.Rollout`.
         gt: its :class:`inspector.data.ground_truth.GroundTruth`.
         limit_margin_deg: the joint-limit margin the numbers were computed with [deg].
+        measures: the :class:`inspector.analysis.measure_settings.MeasureSettings` they were
+            computed with (its ``cache_key()``).
     """
     root = Path(rollout.root).resolve()
     files = sorted(p for p in root.rglob("*") if p.is_file())
@@ -128,6 +131,7 @@ def rollout_key(rollout, gt, limit_margin_deg: float) -> str:
                "files": [_file_state(Path(p)) for p in gt.files],
                "clips": clips},
         "limit_margin_deg": float(limit_margin_deg),
+        "measures": measures.cache_key(),
     }
     return hashlib.sha256(json.dumps(state, sort_keys=True, default=str).encode()).hexdigest()
 

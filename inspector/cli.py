@@ -139,7 +139,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
         thresholds = load_thresholds(args.sanity_config)  # a bad file fails before any work
     report = build_report(args.paths, dataset=args.dataset, jobs=args.jobs, use_cache=not args.no_cache,
                           limit_margin_deg=args.limit_margin, ray=args.ray, calibration=args.calibration,
-                          outcome_source=args.outcome_source)
+                          outcome_source=args.outcome_source, measures=_measures(args))
     if thresholds is not None:
         from .report.sanity import add_sanity
 
@@ -157,7 +157,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
     comparison = build_comparison(args.a, args.b, dataset=args.dataset, jobs=args.jobs,
                                   use_cache=not args.no_cache, limit_margin_deg=args.limit_margin,
-                                  outcome_source=args.outcome_source)
+                                  outcome_source=args.outcome_source, measures=_measures(args))
     _emit(json.dumps(comparison, indent=2) if args.json else format_comparison(comparison))
     return 0
 
@@ -178,7 +178,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     check_listenable(args.host, args.port)
     serve(args.paths, host=args.host, port=args.port, share=args.share, dataset=args.dataset,
           cache_mb=args.cache_mb, use_cache=not args.no_cache, exit_when_stopped=True,
-          calibration=args.calibration, ab=args.ab, outcome_source=args.outcome_source)
+          calibration=args.calibration, ab=args.ab, outcome_source=args.outcome_source, measures=_measures(args))
     return 0
 
 
@@ -188,7 +188,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return export_cli(args.path, args.output, rollout=args.rollout, views=args.views,
                       dataset=args.dataset, use_cache=not args.no_cache, limit_margin_deg=args.limit_margin,
                       episodes=args.episode, ray=args.ray, jobs=args.jobs, calibration=args.calibration,
-                      outcome_source=args.outcome_source)
+                      outcome_source=args.outcome_source, measures=_measures(args))
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
@@ -342,6 +342,39 @@ def _limit_margin_argument(p: argparse.ArgumentParser) -> None:
     p.add_argument("--limit-margin", type=_margin, default=DEFAULT_LIMIT_MARGIN_DEG, metavar="DEG",
                    help="a joint counts as past its URDF limit only beyond this margin "
                         f"(default {DEFAULT_LIMIT_MARGIN_DEG:g} deg)")
+
+
+def _non_negative_float(text: str) -> float:
+    value = _number(text, float)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more (got {text})")
+    return value
+
+
+def _measure_arguments(p: argparse.ArgumentParser) -> None:
+    """The sanity measures' tolerances (docs/metrics.md; :func:`_measures` reads them back)."""
+    from .analysis.measure_settings import DEFAULT_MEASURES as d
+
+    g = p.add_argument_group("sanity measures", "tolerances of completion and of the chunk-seam flag")
+    g.add_argument("--completion-tol-deg", type=_non_negative_float, default=d.completion_tol_deg, metavar="DEG",
+                   help="completion: joints within this of the GT's final pose, 6-joint norm in the data's "
+                        f"units (default {d.completion_tol_deg:g})")
+    g.add_argument("--completion-tol-mm", type=_non_negative_float, default=d.completion_tol_mm, metavar="MM",
+                   help=f"completion: the tool point within this of the final pose's (default {d.completion_tol_mm:g} mm)")
+    g.add_argument("--completion-hold-s", type=_non_negative_float, default=d.completion_hold_s, metavar="S",
+                   help=f"completion: staying there this long (default {d.completion_hold_s:g} s)")
+    g.add_argument("--seam-multiple", type=_non_negative_float, default=d.seam_multiple, metavar="X",
+                   help="a chunk seam is flagged when its jump exceeds this multiple of the GT's typical "
+                        f"(95th percentile) step (default {d.seam_multiple:g}) ...")
+    g.add_argument("--seam-floor", type=_non_negative_float, default=d.seam_floor_deg, metavar="DEG",
+                   help=f"... and this floor, in the data's units (default {d.seam_floor_deg:g})")
+
+
+def _measures(args: argparse.Namespace):
+    from .analysis.measure_settings import MeasureSettings
+
+    return MeasureSettings(args.completion_tol_deg, args.completion_tol_mm, args.completion_hold_s,
+                           args.seam_multiple, args.seam_floor)
 
 
 def _decision_arguments(p: argparse.ArgumentParser) -> None:
@@ -508,6 +541,7 @@ def build_parser() -> argparse.ArgumentParser:
     _limit_margin_argument(p)
     _calibration_argument(p)
     _outcome_source_argument(p)
+    _measure_arguments(p)
     p.set_defaults(func=_cmd_report)
 
     p = sub.add_parser("compare", help="two evaluations rollout by rollout (e.g. two checkpoints)")
@@ -520,6 +554,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the metrics cache")
     _limit_margin_argument(p)
     _outcome_source_argument(p)
+    _measure_arguments(p)
     p.set_defaults(func=_cmd_compare)
 
     p = sub.add_parser("outcomes", help="outcomes of rollouts from a file (a judge, a run sheet, a script)")
@@ -548,6 +583,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "for inspector rank")
     _calibration_argument(p)
     _outcome_source_argument(p)
+    _measure_arguments(p)
     p.set_defaults(func=_cmd_serve)
 
     p = sub.add_parser("export", help="write a Rerun .rrd recording")
@@ -566,6 +602,7 @@ def build_parser() -> argparse.ArgumentParser:
     _limit_margin_argument(p)
     _calibration_argument(p)
     _outcome_source_argument(p)
+    _measure_arguments(p)
     p.set_defaults(func=_cmd_export)
 
     p = sub.add_parser("eval", help="evaluate a served checkpoint against a LeRobot dataset, open loop "

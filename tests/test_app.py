@@ -263,7 +263,7 @@ def test_broken_video_fails_alone(app):
 def test_timeline_failure_shows_error_card(app, monkeypatch):
     import inspector.app._catalog as catalog_module
 
-    def explode(rollout):
+    def explode(rollout, **settings):
         raise RuntimeError("metrics blew up")
 
     monkeypatch.setattr(catalog_module, "build_timeline", explode)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy.spatial.distance import pdist, squareform
 
-from inspector.analysis.coherence import coherence_record, coupling_error, phase_offset
+from inspector.analysis.coherence import coherence_record, coupling_error, gt_motion, phase_offset, phase_offsets
 from inspector.analysis.completion import completion_step
 from inspector.analysis.latents import pca_2d, silhouette
 from inspector.analysis.seams import jerk, seam_jumps
@@ -126,6 +126,8 @@ def test_phase_offset_is_the_lag_of_the_best_pearson_correlation():
         best = max(scores.values())
         expected = min((lag for lag, r in scores.items() if r >= best - 1e-12), key=lambda v: (abs(v), v))
         assert phase_offset(pred, gt, max_lag=30) == expected
+        # the GT side computed once for a batch gives the same lag
+        assert phase_offsets(pred[:, None], gt_motion(gt[:, None]), 30) == [expected]
 
 
 def _silhouette_by_definition(x: np.ndarray, labels: list[int]) -> float:
@@ -235,8 +237,13 @@ def test_sanity_config_overrides_a_threshold_and_bad_ones_are_one_line(tmp_path)
 
 
 @pytest.fixture(scope="module")
-def demo_report(tmp_path_factory) -> dict:
-    out = _cli("report", DEMO, "--json", "--sanity", cache=tmp_path_factory.mktemp("cache"))
+def demo_cache(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("cache")
+
+
+@pytest.fixture(scope="module")
+def demo_report(demo_cache) -> dict:
+    out = _cli("report", DEMO, "--json", "--sanity", cache=demo_cache)
     assert out.returncode == 0, out.stderr
     return json.loads(out.stdout)
 
@@ -252,11 +259,68 @@ def test_demo_seam_jump_is_flagged_at_its_chunk_only(demo_report):
     assert seams["worst"]["chunk"] == SEAM_CHUNK and seams["worst"]["jump_deg"] == pytest.approx(SEAM_JUMP_DEG, abs=2.0)
     assert abs(seams["worst"]["by_joint"][0]) == pytest.approx(SEAM_JUMP_DEG, abs=1.5)  # shoulder_pan
     assert seams["worst"]["gt_step_deg"] < 2.0 and seams["jerk_p95"] > 0 and seams["gt_jerk_p95"] > 0
+    # per-seam detail only for the flagged seams: the row stays small at a thousand rollouts
+    assert seams["flagged_jumps"] == [{k: seams["worst"][k] for k in ("chunk", "jump_deg", "gt_step_deg")}]
+    assert seams["n_seams"] == rows["seam_jump"]["n_chunks"] - 1 and "jump_deg" not in seams
     for tag, row in rows.items():
         if tag != "seam_jump" and row["seams"] is not None:
             assert row["seams"]["flagged"] == [], tag
         if row["kind"] == "single_chunk":
             assert row["seams"] is None and row["completion"] is None and row["video_break"] == {}
+
+
+def test_looser_tolerances_complete_sooner_and_flag_fewer_seams_never_read_from_the_cache(demo_report, demo_cache):
+    # the same metrics cache as the defaults' report: a row of other tolerances is not read back
+    out = _cli("report", DEMO / "rollouts" / "early_wander", DEMO / "rollouts" / "seam_jump", "--json",
+               "--completion-tol-deg", "20", "--completion-hold-s", "0.2", "--seam-floor", "30", cache=demo_cache)
+    assert out.returncode == 0, out.stderr
+    loose, default = _rows(json.loads(out.stdout)), _rows(demo_report)
+    c, c0 = loose["early_wander"]["completion"], default["early_wander"]["completion"]
+    assert (c["tol_deg"], c["hold_s"], c0["tol_deg"], c0["hold_s"]) == (20.0, 0.2, 6.0, 0.5)
+    assert c["time_s"] < c0["time_s"] and c["gt_time_s"] < c0["gt_time_s"]
+    s, s0 = loose["seam_jump"]["seams"], default["seam_jump"]["seams"]
+    assert s0["flagged"] == [SEAM_CHUNK] and s["flagged"] == [] and s["threshold_deg"] == 30.0
+    assert s["worst"] == s0["worst"]  # the jumps themselves do not depend on the flag
+
+
+@pytest.mark.parametrize("flag,value,what", [("--completion-tol-deg", "-1", "must be 0 or more"),
+                                             ("--seam-multiple", "abc", "must be a number"),
+                                             ("--completion-hold-s", "nan", "must be a finite number")])
+def test_bad_tolerances_are_one_line(flag, value, what):
+    out = _cli("report", DEMO, flag, value)
+    assert out.returncode == 2 and out.stdout == ""
+    assert out.stderr.strip().splitlines() == [f"error: {flag}: {what} (got {value!r})" if what == "must be a number"
+                                               else f"error: {flag}: {what} (got {value})"]
+
+
+def test_every_command_computing_the_measures_takes_the_tolerances():
+    from inspector.analysis.measure_settings import MeasureSettings
+    from inspector.cli import _measures, build_parser
+
+    flags = ["--completion-tol-deg", "9", "--completion-tol-mm", "30", "--completion-hold-s", "1",
+             "--seam-multiple", "3", "--seam-floor", "4"]
+    for command in (["report", "S"], ["compare", "A", "B"], ["serve", "S"], ["export", "S"]):
+        assert _measures(build_parser().parse_args([*command, *flags])) == MeasureSettings(9, 30, 1, 3, 4)
+        assert _measures(build_parser().parse_args(command)) == MeasureSettings()
+
+
+def test_the_benchmarks_switch_turns_the_measures_off_and_keys_the_cache_apart(monkeypatch):
+    from inspector.analysis.measure_settings import MeasureSettings
+    from inspector.analysis.sanity import sanity_measures
+    from inspector.analysis.timeline import build_timeline
+    from inspector.cache import rollout_key
+    from inspector.data.session import load_session_rollout
+
+    rollout = load_session_rollout(open_session(DEMO), "seam_jump")
+    tl = build_timeline(rollout)
+    on = sanity_measures(tl, {})
+    key = rollout_key(tl.rollout, tl.gt, 2.0, MeasureSettings())
+    assert on["seams"] is not None and on["completion"] is not None and on["joint_coherence"] is not None
+    assert key != rollout_key(tl.rollout, tl.gt, 2.0, MeasureSettings(seam_floor_deg=4.0))
+    monkeypatch.setenv("INSPECTOR_SANITY_MEASURES", "off")
+    assert sanity_measures(tl, {}) == {"seams": None, "completion": None, "joint_coherence": None,
+                                       "video_break": {}, "video_degradation": {}, "latents": None}
+    assert rollout_key(tl.rollout, tl.gt, 2.0, MeasureSettings()) != key
 
 
 def test_demo_early_completion_and_its_wandering_tail(demo_report):
@@ -290,6 +354,8 @@ def test_demo_phase_lag_is_found_on_its_joint(demo_report):
 
 
 def test_demo_video_break_is_at_the_planted_chunk_only(demo_report):
+    for row in demo_report["rollouts"]:  # the break and its curve; the per-chunk measures stay out
+        assert all(set(d) == {"break_chunk", "degradation"} for d in row["video_degradation"].values())
     rows = _rows(demo_report)
     assert rows["video_degrades"]["video_break"] == {"front": DEGRADE_FROM_CHUNK, "wrist": DEGRADE_FROM_CHUNK}
     curve = rows["video_degrades"]["video_degradation"]["front"]["degradation"]

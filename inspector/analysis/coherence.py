@@ -14,7 +14,8 @@ differently from the real arm.
 
 from __future__ import annotations
 
-from typing import TypedDict
+import functools
+from typing import NamedTuple, TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -23,6 +24,7 @@ from ..units import JOINT_NAMES
 
 MAX_LAG_S = 1.0
 MIN_MOTION = 0.05  # [deg / step]
+Array = npt.NDArray[np.float64]
 COUPLED_PAIRS = (("shoulder_lift", "elbow_flex"), ("elbow_flex", "wrist_flex"))
 PHASE_FLAG_STEPS = 6  # |offset| above this many steps (0.2 s at 30 fps) is reported as out of phase
 
@@ -32,29 +34,49 @@ def phase_offset(pred: npt.ArrayLike, gt: npt.ArrayLike, max_lag: int) -> int | 
     return phase_offsets(np.asarray(pred, np.float64)[:, None], np.asarray(gt, np.float64)[:, None], max_lag)[0]
 
 
-def phase_offsets(pred: npt.ArrayLike, gt: npt.ArrayLike, max_lag: int) -> list[int | None]:
-    """Best lag [steps] of each joint of (T, J) predicted series against their GT.
+class GtMotion(NamedTuple):
+    """The GT side of :func:`phase_offsets` for (n + 1, J) GT series: the same for every rollout
+    of a batch (they share their GT), so computed once for them all."""
+
+    v: Array  # (J, n) velocities
+    moving: npt.NDArray[np.bool_]  # (J,) velocity std >= MIN_MOTION
+    c: Array  # (J, n + 1) cumulative sums of v, from 0
+    c2: Array  # ... of v * v
+    spectrum: npt.NDArray[np.complex128]  # (J, n + 1) conj(rfft(v, 2n))
+
+
+def gt_motion(gt: npt.ArrayLike) -> GtMotion:
+    vg = np.diff(np.asarray(gt, np.float64), axis=0).T
+    zero = np.zeros((vg.shape[0], 1))
+    n = vg.shape[1]
+    return GtMotion(vg, vg.std(axis=1) >= MIN_MOTION if n else np.zeros(vg.shape[0], bool),
+                    np.hstack([zero, np.cumsum(vg, axis=1)]), np.hstack([zero, np.cumsum(vg * vg, axis=1)]),
+                    np.conj(np.fft.rfft(vg, 2 * n)) if n else np.zeros((vg.shape[0], 1), np.complex128))
+
+
+def phase_offsets(pred: npt.ArrayLike, gt: npt.ArrayLike | GtMotion, max_lag: int) -> list[int | None]:
+    """Best lag [steps] of each joint of (T, J) predicted series against their GT (the series,
+    or their :func:`gt_motion`).
 
     Every lag and joint at once: the cross products from one FFT cross-correlation, the
     windows' sums and squares from cumulative sums (a lag loop of ``np.corrcoef`` cost 60 ms a
     rollout). Among equally good lags the smallest (in magnitude) wins.
     """
+    g = gt if isinstance(gt, GtMotion) else gt_motion(gt)
     vp = np.diff(np.asarray(pred, np.float64), axis=0).T  # (J, n)
-    vg = np.diff(np.asarray(gt, np.float64), axis=0).T
+    vg = g.v
     n = vg.shape[1]
     if n < 4:
         return [None] * vg.shape[0]
-    moving = vg.std(axis=1) >= MIN_MOTION
     max_lag = max(0, min(max_lag, n // 3))
-    lags = np.array(sorted(range(-max_lag, max_lag + 1), key=lambda v: (abs(v), v)))
+    lags = _lags(max_lag)
     # sum_t vp[t] vg[t - lag], every lag at once as a circular cross-correlation by FFT, long
     # enough (2n) that no wanted lag wraps around (np.correlate per joint cost 4x as much)
     size = 2 * n
-    spectrum = np.fft.rfft(vp, size) * np.conj(np.fft.rfft(vg, size))
-    cross = np.fft.irfft(spectrum, size)[:, lags % size]
+    cross = np.fft.irfft(np.fft.rfft(vp, size) * g.spectrum, size)[:, lags % size]
     zero = np.zeros((vp.shape[0], 1))
     cp, cp2 = np.hstack([zero, np.cumsum(vp, axis=1)]), np.hstack([zero, np.cumsum(vp * vp, axis=1)])
-    cg, cg2 = np.hstack([zero, np.cumsum(vg, axis=1)]), np.hstack([zero, np.cumsum(vg * vg, axis=1)])
+    cg, cg2 = g.c, g.c2
     pos = lags >= 0
     # lag >= 0 pairs vp[lag:] with vg[:n - lag]; lag < 0 pairs vp[:n + lag] with vg[-lag:]
     p_lo, p_hi = np.where(pos, lags, 0), np.where(pos, n, n + lags)
@@ -66,7 +88,13 @@ def phase_offsets(pred: npt.ArrayLike, gt: npt.ArrayLike, max_lag: int) -> list[
     ok = (var_p > 1e-12 * np.maximum(sp2, 1.0)) & (var_g > 1e-12 * np.maximum(sg2, 1.0))
     r = np.where(ok, (cross - sp * sg / m) / np.sqrt(np.where(ok, var_p * var_g, 1.0)), -np.inf)
     best = lags[np.argmax(r, axis=1)]
-    return [int(b) if mv and k.any() else None for b, mv, k in zip(best, moving, ok)]
+    return [int(b) if mv and k.any() else None for b, mv, k in zip(best, g.moving, ok)]
+
+
+@functools.lru_cache(maxsize=8)
+def _lags(max_lag: int) -> npt.NDArray[np.int64]:
+    """-max_lag..max_lag, smallest magnitude first (so that argmax prefers it among ties)."""
+    return np.array(sorted(range(-max_lag, max_lag + 1), key=lambda v: (abs(v), v)))
 
 
 def coupling_error(pred: npt.ArrayLike, gt: npt.ArrayLike, a: int, b: int) -> float:
@@ -85,16 +113,20 @@ class CoherenceJson(TypedDict):
     out_of_phase: list[str]
 
 
-def coherence_record(pred: npt.ArrayLike, gt_aligned: npt.ArrayLike, in_episode: npt.ArrayLike, fps: float
-                     ) -> CoherenceJson | None:
-    """Joint coherence over the in-episode steps (None with fewer than 8 of them)."""
+def coherence_record(pred: npt.ArrayLike, gt_aligned: npt.ArrayLike, in_episode: npt.ArrayLike, fps: float,
+                     motion: GtMotion | None = None) -> CoherenceJson | None:
+    """Joint coherence over the in-episode steps (None with fewer than 8 of them).
+
+    Args:
+        motion: :func:`gt_motion` of ``gt_aligned[in_episode]``, if already known.
+    """
     inside = np.asarray(in_episode, bool)
     p = np.asarray(pred, np.float64)[inside]
     g = np.asarray(gt_aligned, np.float64)[inside]
     if len(p) < 8:
         return None
     max_lag = int(round(MAX_LAG_S * fps))
-    steps = dict(zip(JOINT_NAMES, phase_offsets(p, g, max_lag)))
+    steps = dict(zip(JOINT_NAMES, phase_offsets(p, g if motion is None else motion, max_lag)))
     index = {name: j for j, name in enumerate(JOINT_NAMES)}
     coupling = {f"{a}-{b}": round(coupling_error(p, g, index[a], index[b]), 4) for a, b in COUPLED_PAIRS}
     return {"phase_offset_steps": steps,

@@ -16,9 +16,10 @@ import numpy.typing as npt
 
 from ..data.session import CHAINED_KINDS
 from ..robot.kinematics import kinematics
-from .coherence import CoherenceJson, coherence_record
+from .coherence import CoherenceJson, GtMotion, coherence_record, gt_motion
 from .completion import CompletionJson, CompletionTarget, completion_record, completion_target
-from .seams import SeamsJson, jerk_p95, seam_jumps, seams_record
+from .measures_switch import sanity_measures_on
+from .seams import Seams, SeamsJson, jerk_p95, seam_jumps, seams_record
 from .timeline import RolloutTimeline
 from .video_break import VideoBreakJson, video_break_record
 from .video_metrics import VideoMetrics
@@ -46,11 +47,14 @@ def sanity_measures(tl: RolloutTimeline, video: Mapping[str, VideoMetrics],
         video: its video metrics per view (their per-frame ``quality`` feeds the video break).
         imagined_quality: (F, 3) per-frame measures of views without GT video, measured apart.
     """
+    if not sanity_measures_on():
+        return {"seams": None, "completion": None, "joint_coherence": None, "video_break": {},
+                "video_degradation": {}, "latents": None}
     chained = tl.kind in CHAINED_KINDS
     inside = ~tl.post_episode if tl.post_episode is not None else np.ones(tl.n_steps, bool)
     seams = None
-    if chained:
-        s = seam_jumps(tl.chunks, tl.executed_per_chunk, tl.gt_aligned, inside)
+    s = rollout_seams(tl)
+    if s is not None:
         seams = seams_record(s, jerk_p95(tl.pred, tl.fps), _gt_side(tl, inside).jerk_p95)
     completion = None
     if chained and tl.gt.actions is not None and tl.time_aligned_drift is not None:
@@ -59,7 +63,7 @@ def sanity_measures(tl: RolloutTimeline, video: Mapping[str, VideoMetrics],
         completion = completion_record(tl.pred, tl.ee_pred, target, tl.time_aligned_drift, tl.fps)
     coherence = None
     if tl.gt_aligned is not None:
-        coherence = coherence_record(tl.pred, tl.gt_aligned, inside, tl.fps)
+        coherence = coherence_record(tl.pred, tl.gt_aligned, inside, tl.fps, _gt_side(tl, inside).motion)
     degradation: dict[str, VideoBreakJson] = {}
     if chained:
         per_view = {v: vm.quality for v, vm in video.items() if vm.quality is not None}
@@ -73,6 +77,15 @@ def sanity_measures(tl: RolloutTimeline, video: Mapping[str, VideoMetrics],
             "latents": None if latents is None else {"n": int(latents.shape[0]), "dim": int(latents.shape[1])}}
 
 
+def rollout_seams(tl: RolloutTimeline) -> Seams | None:
+    """Every chunk seam of a chained rollout (None for others), flagged with its tolerances."""
+    if tl.kind not in CHAINED_KINDS:
+        return None
+    inside = ~tl.post_episode if tl.post_episode is not None else np.ones(tl.n_steps, bool)
+    return seam_jumps(tl.chunks, tl.executed_per_chunk, tl.gt_aligned, inside, tl.measures.seam_multiple,
+                      tl.measures.seam_floor_deg)
+
+
 @dataclass
 class _GtSide:
     """The measures' GT-only parts: the same for every rollout of a batch, whose timelines share
@@ -80,9 +93,10 @@ class _GtSide:
     alive (so that identity compares them safely)."""
 
     held: tuple[Any, ...]  # compared by identity
-    scalars: tuple[Any, ...]  # compared by value
+    scalars: tuple[Any, ...]  # compared by value (the settings among them)
     jerk_p95: float | None
     completion: CompletionTarget | None
+    motion: GtMotion | None  # the GT's velocities, for every rollout's phase offsets
 
 
 _last_gt: _GtSide | None = None  # rollouts of one batch are measured one after another
@@ -90,7 +104,7 @@ _last_gt: _GtSide | None = None  # rollouts of one batch are measured one after 
 
 def _gt_side(tl: RolloutTimeline, inside: npt.NDArray[np.bool_]) -> _GtSide:
     global _last_gt
-    held, scalars = (tl.gt.actions, tl.gt_aligned, tl.post_episode), (tl.gt.offset, tl.units, tl.fps)
+    held, scalars = (tl.gt.actions, tl.gt_aligned, tl.post_episode), (tl.gt.offset, tl.units, tl.fps, tl.measures)
     last = _last_gt
     if last is not None and all(a is b for a, b in zip(last.held, held)) and last.scalars == scalars:
         return last
@@ -98,9 +112,12 @@ def _gt_side(tl: RolloutTimeline, inside: npt.NDArray[np.bool_]) -> _GtSide:
     jerk = jerk_p95(tl.gt_aligned[inside], tl.fps) if tl.gt_aligned is not None else None
     target = None
     if tl.gt.actions is not None:
+        m = tl.measures
         target = completion_target(tl.gt.actions, lambda q: kinematics().gripper_positions(q, units),
-                                   tl.gt.offset, tl.fps)
-    _last_gt = _GtSide(held, scalars, jerk, target)
+                                   tl.gt.offset, tl.fps, m.completion_tol_deg, m.completion_tol_mm,
+                                   m.completion_hold_s)
+    motion = gt_motion(tl.gt_aligned[inside]) if tl.gt_aligned is not None else None
+    _last_gt = _GtSide(held, scalars, jerk, target, motion)
     return _last_gt
 
 

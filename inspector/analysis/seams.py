@@ -107,12 +107,22 @@ class SeamWorst(TypedDict):
     by_joint: list[float]
 
 
+class FlaggedSeam(TypedDict):
+    """A flagged seam: the chunk it starts, its jump's norm and the GT's own step there (data units)."""
+
+    chunk: int
+    jump_deg: float
+    gt_step_deg: float | None
+
+
 class SeamsJson(TypedDict):
-    """The ``seams`` field of a report row."""
+    """The ``seams`` field of a report row: the flagged seams and the worst one in detail, not
+    every seam's jump (a 60-chunk rollout has 59 seams; the recording and the app plot them all)."""
 
     flagged: list[int]
+    flagged_jumps: list[FlaggedSeam]  # in the order of ``flagged``
     worst: SeamWorst | None
-    jump_deg: list[float]  # per seam, chunk 1..N-1
+    n_seams: int
     threshold_deg: float
     typical_step_deg: float
     jerk_p95: float | None
@@ -120,14 +130,19 @@ class SeamsJson(TypedDict):
 
 
 def seams_record(s: Seams, jerk_pred: float | None, jerk_gt: float | None) -> SeamsJson:
+    def gt_step(i: int) -> float | None:
+        return None if s.gt_step is None or not np.isfinite(s.gt_step[i]) else round(float(s.gt_step[i]), 4)
+
     worst: SeamWorst | None = None
     if len(s.jump_norm):
         i = int(np.argmax(s.jump_norm))
-        gt = None if s.gt_step is None or not np.isfinite(s.gt_step[i]) else round(float(s.gt_step[i]), 4)
-        worst = {"chunk": int(s.chunk[i]), "jump_deg": round(float(s.jump_norm[i]), 4), "gt_step_deg": gt,
+        worst = {"chunk": int(s.chunk[i]), "jump_deg": round(float(s.jump_norm[i]), 4), "gt_step_deg": gt_step(i),
                  "by_joint": [round(float(v), 4) for v in s.jump[i]]}
-    return {"flagged": [int(k) for k in s.chunk[s.flagged]], "worst": worst,
-            "jump_deg": [round(float(v), 4) for v in s.jump_norm],
+    flagged = np.flatnonzero(s.flagged)
+    return {"flagged": [int(s.chunk[i]) for i in flagged],
+            "flagged_jumps": [{"chunk": int(s.chunk[i]), "jump_deg": round(float(s.jump_norm[i]), 4),
+                               "gt_step_deg": gt_step(int(i))} for i in flagged],
+            "worst": worst, "n_seams": len(s.jump_norm),
             "threshold_deg": round(s.threshold, 4), "typical_step_deg": round(s.typical_step, 4),
             "jerk_p95": None if jerk_pred is None else round(jerk_pred, 3),
             "gt_jerk_p95": None if jerk_gt is None else round(jerk_gt, 3)}

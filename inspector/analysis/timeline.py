@@ -25,6 +25,7 @@ from ..data.ground_truth import GroundTruth, resolve_ground_truth
 from ..data.session import Rollout
 from ..units import DEFAULT_LIMIT_MARGIN_DEG, JOINT_NAMES, Units
 from . import metrics
+from .measure_settings import DEFAULT_MEASURES, MeasureSettings
 from .sweep import SweepMetrics, sweep_metrics
 from .video_action import JointTimes, VideoAction, agreement
 from .video_metrics import VideoMetrics, compare_clips
@@ -94,6 +95,8 @@ class RolloutTimeline:
     chunk_errors: metrics.ChunkErrors | None = None  # over chunks fully inside the GT
     chunk_rmse: Array | None = None  # (N,) NaN for chunks without full GT
     episode_end_step: int | None = None  # first post-episode step, if the rollout outlasts it
+    # the tolerances of the sanity measures (completion, seams) its rows are computed with
+    measures: MeasureSettings = DEFAULT_MEASURES
     _video: dict[str, VideoMetrics] = field(default_factory=dict, repr=False)
     _video_lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
@@ -263,10 +266,11 @@ class RolloutTimeline:
 
 
 def build_timeline(rollout: Rollout, dataset_root: Path | None = None, gt: GroundTruth | None = None,
-                   limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG) -> RolloutTimeline:
+                   limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG,
+                   measures: MeasureSettings = DEFAULT_MEASURES) -> RolloutTimeline:
     """Compute every joint-space metric of ``rollout`` (video metrics stay lazy)."""
     gt = gt if gt is not None else resolve_ground_truth(rollout, dataset_root)
-    return build_timelines([rollout], gt, limit_margin_deg)[0]
+    return build_timelines([rollout], gt, limit_margin_deg, measures)[0]
 
 
 def batch_key(rollout: Rollout, gt: GroundTruth) -> tuple | None:
@@ -277,7 +281,8 @@ def batch_key(rollout: Rollout, gt: GroundTruth) -> tuple | None:
 
 
 def build_timelines(rollouts: Sequence[Rollout], gt: GroundTruth,
-                    limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG) -> list[RolloutTimeline]:
+                    limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG,
+                    measures: MeasureSettings = DEFAULT_MEASURES) -> list[RolloutTimeline]:
     """Timelines of rollouts that share ``gt`` (same :func:`batch_key`), their joint metrics in
     one batch. Each rollout's numbers are the same as when it is computed alone."""
     first = rollouts[0]
@@ -285,7 +290,10 @@ def build_timelines(rollouts: Sequence[Rollout], gt: GroundTruth,
     # a video-only rollout has no predicted arm to hold against the GT arm: its joint measures stay None
     m = sweep_metrics(chunks, gt.actions if first.has_joints else None, first.units, first.steps_per_chunk, gt.offset, limit_margin_deg,
                       alignments=first.kind != "episode")
-    return [_timeline(r, gt, m, b, limit_margin_deg) for b, r in enumerate(rollouts)]
+    timelines = [_timeline(r, gt, m, b, limit_margin_deg) for b, r in enumerate(rollouts)]
+    for tl in timelines:
+        tl.measures = measures
+    return timelines
 
 
 def _timeline(rollout: Rollout, gt: GroundTruth, m: SweepMetrics, b: int, margin_deg: float) -> RolloutTimeline:

@@ -41,7 +41,8 @@ SUBSAMPLE = 4
 # ... and every FRAME_STRIDE-th frame (three of a chunk's nine): a chunk's median needs no more,
 # and the report's 200 rollouts with two views then pay a few seconds for it, not a minute.
 FRAME_STRIDE = 3
-_BATCH = 64  # frames measured in one vectorised pass (one numpy call per step for all of them)
+_BATCH = 16  # frames measured in one vectorised pass; every clip of a task holds up to this many lumas
+# at once (32 clips x 64 frames held 40 MB more a worker; 16 gives the same numbers)
 
 
 def _luma(rgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
@@ -129,8 +130,8 @@ class VideoBreakJson(TypedDict):
     """A view's degradation curve and break chunk, as the report writes it."""
 
     break_chunk: int | None
-    degradation: list[float | None]  # per chunk, 1 = as the first chunk
-    measures: dict[str, list[float | None]]  # per chunk: sharpness, noise, flicker (medians)
+    degradation: list[float | None]  # per chunk, 1 = as the first chunk (the per-chunk measures
+    # behind it stay out of report rows: three more lists per view and rollout)
 
 
 def degradation(quality: npt.ArrayLike, frames_per_chunk: int) -> tuple[Array, Array]:
@@ -180,11 +181,9 @@ def break_chunk(curve: npt.ArrayLike, ratio: float = BREAK_RATIO) -> int | None:
 
 def video_break_record(quality: npt.ArrayLike, frames_per_chunk: int, ratio: float = BREAK_RATIO) -> VideoBreakJson:
     """A view's ``video_break`` entry from its per-frame measures."""
-    per_chunk, curve = degradation(quality, frames_per_chunk)
-    return {"break_chunk": break_chunk(curve, ratio),
-            "degradation": [_round(v) for v in curve],
-            "measures": {name: [_round(v) for v in per_chunk[:, m]] for m, name in enumerate(QUALITY_MEASURES)}}
+    _, curve = degradation(quality, frames_per_chunk)
+    return {"break_chunk": break_chunk(curve, ratio), "degradation": [_round(v, 3) for v in curve]}
 
 
-def _round(v: float) -> float | None:
-    return round(float(v), 4) if np.isfinite(v) else None
+def _round(v: float, digits: int = 4) -> float | None:
+    return round(float(v), digits) if np.isfinite(v) else None

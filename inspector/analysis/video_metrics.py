@@ -23,6 +23,7 @@ import numpy.typing as npt
 from ..data.video import ForwardReader, VideoClip, probe
 from ..errors import InspectorError
 from . import metrics
+from .measures_switch import sanity_measures_on
 from .video_action import FrameMatch, FrameMatchJson, Thumbnails, match_frames
 from .video_break import FrameQuality
 
@@ -111,7 +112,7 @@ def compare_clips(view: str, imagined: Sequence[VideoClip], gt: VideoClip | None
     streams = [_Stream(clip) for clip in imagined]
     gt_thumbs = Thumbnails()
     thumbs = [Thumbnails() for _ in streams]
-    quality = [FrameQuality() for _ in streams]
+    quality = [FrameQuality() if sanity_measures_on() else None for _ in streams]
     known_gt: list[GtThumbnails | None] = []  # the clip's thumbnails from an earlier call, once looked up
 
     def gt_known() -> GtThumbnails | None:
@@ -143,7 +144,8 @@ def compare_clips(view: str, imagined: Sequence[VideoClip], gt: VideoClip | None
             rgb = item[1]
             if on_imagined is not None:
                 on_imagined(b, f, rgb)
-            quality[b].add(f, rgb)
+            if (fq := quality[b]) is not None:
+                fq.add(f, rgb)
             gt_rgb = gt_stream.frame_at(target, rgb.shape[1::-1]) if gt_stream is not None and target >= 0 else None
             _set(psnr[b], f, np.nan if gt_rgb is None else float(metrics.psnr(rgb[None], gt_rgb[None])[0]))
             if with_ssim:
@@ -165,7 +167,7 @@ def compare_clips(view: str, imagined: Sequence[VideoClip], gt: VideoClip | None
             candidates = GT_THUMBNAILS.put(gt_stream, gt_thumbs)
     matches = [_match(t, candidates) if matchable and candidates is not None else None for t in thumbs]
     return [VideoMetrics(view, np.array(p, dtype=np.float64), np.array(q, dtype=np.float64) if with_ssim else None, m,
-                         fq.array(len(p)))
+                         None if fq is None else fq.array(len(p)))
             for p, q, m, fq in zip(psnr, ssim, matches, quality)]
 
 

@@ -21,6 +21,7 @@ from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..analysis.measure_settings import DEFAULT_MEASURES, MeasureSettings
 from ..analysis.timeline import RolloutTimeline, build_timeline
 from ..analysis.video_metrics import VideoMetrics
 from ..cache import rollout_key
@@ -89,9 +90,11 @@ class Catalog:
 
     def __init__(self, sources: Sources, executor: Executor, joint_links: dict[str, str],
                  frame_cache: FrameCache | None = None, metrics_cache=None,
-                 matcher: Executor | None = None, outcome_source: str | None = None) -> None:
+                 matcher: Executor | None = None, outcome_source: str | None = None,
+                 measures: MeasureSettings = DEFAULT_MEASURES) -> None:
         self.sources = sources
         self.outcomes = ServedOutcomes(outcome_source)
+        self.measures = measures  # the sanity measures' tolerances (--completion-tol-deg, ...)
         self._executor = executor
         self._matcher = matcher
         self._joint_links = joint_links
@@ -167,7 +170,7 @@ class Catalog:
         try:
             # Refused at start-up already when served; checked again in case a link appeared since.
             check_confined(rollout.root, [entry.session.root])
-            tl = build_timeline(rollout)
+            tl = build_timeline(rollout, measures=self.measures)
             remember = self._video_metrics_cache(tl)
             scene = RolloutScene.from_timeline(tl, self._joint_links)
         except InspectorError:
@@ -197,7 +200,7 @@ class Catalog:
         if cache is None:
             return None
 
-        key = rollout_key(tl.rollout, tl.gt, tl.limit_margin_deg)
+        key = rollout_key(tl.rollout, tl.gt, tl.limit_margin_deg, tl.measures)
         for view, vm in read_entry(cache, key).video.items():
             if view in tl.video_views():
                 tl.set_video_metrics(vm)

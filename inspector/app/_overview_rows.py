@@ -84,6 +84,7 @@ class OverviewRows(Notifying):
 
     def __init__(self, catalog, limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG) -> None:
         self._margin = limit_margin_deg
+        self._measures = catalog.measures
         cache = catalog.metrics_cache
         self._cache_dir = str(cache.root) if cache is not None else None
         self._use_cache = bool(cache is not None and cache.enabled)
@@ -152,7 +153,8 @@ class OverviewRows(Notifying):
 
         _lower_priority()
         try:
-            tasks = plan_tasks(list(self._sessions.values()), 1, self._margin, self._cache_dir, self._use_cache)
+            tasks = plan_tasks(list(self._sessions.values()), 1, self._margin, self._cache_dir, self._use_cache,
+                               self._measures)
             to_compute = []
             for task in tasks:  # first every cached row: the whole table at once
                 if self._stop.is_set():

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
+from ..analysis.measure_settings import DEFAULT_MEASURES, MeasureSettings
 from ..cache import DEFAULT_FRAME_CACHE_MB, MetricsCache
 from ..data.session import is_session
 from ..data.sources import BUNDLED_DEMO, Sources, open_sources
@@ -52,7 +53,8 @@ class InspectorApp:
 
     def __init__(self, sources: Sources, host: str = "127.0.0.1", port: int = 8080,
                  cache_mb: float = DEFAULT_FRAME_CACHE_MB, metrics_cache: MetricsCache | None = None,
-                 ab: bool = False, outcome_source: str | None = None) -> None:
+                 ab: bool = False, outcome_source: str | None = None,
+                 measures: MeasureSettings = DEFAULT_MEASURES) -> None:
         import viser
 
         self.sources = sources
@@ -71,7 +73,7 @@ class InspectorApp:
         self.joint_links = joint_child_links()
         self.catalog = Catalog(sources, self._decoder, self.joint_links, self.frame_cache,
                                metrics_cache if metrics_cache is not None else MetricsCache(), self._matcher,
-                               outcome_source=outcome_source)
+                               outcome_source=outcome_source, measures=measures)
         # summary rows of every rollout for the overview, computed once when a tab first shows it
         self.overview_rows = OverviewRows(self.catalog)
         self.server = viser.ViserServer(host=host, port=port, label="inspector", verbose=False)
@@ -164,7 +166,7 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
           share: bool = False, dataset: str | Path | None = None, block: bool = True,
           cache_mb: float = DEFAULT_FRAME_CACHE_MB, use_cache: bool = True,
           exit_when_stopped: bool = False, calibration: str | None = None, ab: bool = False,
-          outcome_source: str | None = None) -> InspectorApp:
+          outcome_source: str | None = None, measures: MeasureSettings = DEFAULT_MEASURES) -> InspectorApp:
     """Serve sessions in the browser (the bundled demo when ``paths`` is empty).
 
     Args:
@@ -186,6 +188,7 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
         outcome_source: the outcome source the Overview's columns and the Label panel show
             (``--outcome-source``: label, file, sim or recording; None: the precedence rule).
             Labels made in the app are saved as source ``label`` either way.
+        measures: the sanity measures' tolerances (completion's, the seam flag's).
 
     Returns:
         The :class:`InspectorApp` (``.port``, ``.url``, ``.stop()``, ``.tabs``).
@@ -210,7 +213,8 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
                                      f"(got {len(served_sessions(sources.sessions))})")
     try:
         app = InspectorApp(sources, host=host, port=port, cache_mb=cache_mb,
-                           metrics_cache=MetricsCache(enabled=use_cache), ab=ab, outcome_source=outcome_source)
+                           metrics_cache=MetricsCache(enabled=use_cache), ab=ab, outcome_source=outcome_source,
+                           measures=measures)
     except BaseException:  # Ctrl-C while starting included: drop temporary sessions
         sources.close()
         raise

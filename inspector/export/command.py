@@ -10,6 +10,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from ..analysis.measure_settings import DEFAULT_MEASURES, MeasureSettings
 from ..analysis.timeline import build_timeline
 from ..cache import MetricsCache
 from ..data.episodes import episode_rollout
@@ -28,7 +29,7 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
                use_cache: bool = True, limit_margin_deg: float | None = None,
                episodes: Sequence[int] | None = None, ray: str | None = None,
                jobs: int | None = None, calibration: str | None = None,
-               outcome_source: str | None = None) -> int:
+               outcome_source: str | None = None, measures: MeasureSettings = DEFAULT_MEASURES) -> int:
     """``inspector export``: write one recording per rollout (or dataset episode); returns the exit code.
 
     Args:
@@ -48,6 +49,7 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
         calibration: a GR00T-Dreams dump's calibration (``--calibration``; None: its default).
         outcome_source: the outcome source whose success and progress each recording shows
             (``--outcome-source``; None: a label over a file over sim/recording).
+        measures: the sanity measures' tolerances.
 
     Bad input prints ``error: <file>: <what>`` to stderr and returns 2; the other rollouts of a
     session are still exported when one of them is broken.
@@ -66,11 +68,11 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
             targets = _plan_outputs(sources, Path(path), Path(output), rollout, views)
             if ray is not None:
 
-                return 2 if export_on_ray(targets, ray, views, margin, use_cache, outcome_source) else 0
+                return 2 if export_on_ray(targets, ray, views, margin, use_cache, outcome_source, measures) else 0
             if len(targets) > 1:
 
                 failed = export_in_processes(targets, worker_count(jobs, len(targets)), views, margin, use_cache,
-                                             outcome_source)
+                                             outcome_source, measures)
                 return 2 if failed else 0
             for session, tag, dest in targets:
                 if tag in session.errors:
@@ -80,7 +82,7 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
                 bar = FractionBar(tag)
                 try:
                     export_rollout(session.rollouts[tag], dest, views, margin, cache, progress=bar,
-                                   outcome_source=outcome_source)
+                                   outcome_source=outcome_source, measures=measures)
                 except InspectorError as exc:
                     bar.close()
                     _print_error(exc)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
 
+from ..analysis.measure_settings import DEFAULT_MEASURES, MeasureSettings
 from ..cache import MetricsCache, take_unsaid, warn_once
 from ..data.session import load_session_rollout, read_session_with_gt
 from ..errors import InspectorError
@@ -45,6 +46,7 @@ class ExportJob:
         limit_margin_deg: joint-limit margin [deg].
         use_cache: read and write the metrics cache.
         outcome_source: the outcome source the recording shows (None: the precedence rule).
+        measures: the sanity measures' tolerances.
     """
 
     session_root: str
@@ -55,6 +57,7 @@ class ExportJob:
     limit_margin_deg: float
     use_cache: bool = True
     outcome_source: str | None = None
+    measures: MeasureSettings = DEFAULT_MEASURES
 
 
 @dataclass(frozen=True)
@@ -81,7 +84,7 @@ def run_export_job(job: ExportJob) -> ExportOutcome:
     try:
         rollout = load_session_rollout(read_session_with_gt(job.session_root, job.dataset), job.tag)
         dest = export_rollout(rollout, Path(job.dest), job.views, job.limit_margin_deg,
-                              MetricsCache(enabled=job.use_cache), outcome_source=job.outcome_source)
+                              MetricsCache(enabled=job.use_cache), outcome_source=job.outcome_source, measures=job.measures)
     except InspectorError as exc:
         return ExportOutcome(job.tag, job.dest, error_file=exc.file, error=exc.what, worker_pid=os.getpid(),
                              cache_warning=take_unsaid())
@@ -90,10 +93,11 @@ def run_export_job(job: ExportJob) -> ExportOutcome:
 
 
 def export_on_ray(targets: Sequence[tuple], address: str, views: Sequence[str] | None,
-                  limit_margin_deg: float, use_cache: bool, outcome_source: str | None = None) -> int:
+                  limit_margin_deg: float, use_cache: bool, outcome_source: str | None = None,
+                  measures: MeasureSettings = DEFAULT_MEASURES) -> int:
     """Write ``targets`` (``[(session, tag, dest)]``) as Ray tasks; print each file written and each
     error as ``inspector export`` does; returns how many failed."""
-    printer = _OutcomePrinter(targets, views, limit_margin_deg, use_cache, outcome_source)
+    printer = _OutcomePrinter(targets, views, limit_margin_deg, use_cache, outcome_source, measures)
     if printer.jobs:
         with ray_workers(address) as workers:
             for job, outcome, lost in workers.imap(run_export_job, printer.jobs):
@@ -102,10 +106,11 @@ def export_on_ray(targets: Sequence[tuple], address: str, views: Sequence[str] |
 
 
 def export_in_processes(targets: Sequence[tuple], jobs: int, views: Sequence[str] | None,
-                        limit_margin_deg: float, use_cache: bool, outcome_source: str | None = None) -> int:
+                        limit_margin_deg: float, use_cache: bool, outcome_source: str | None = None,
+                        measures: MeasureSettings = DEFAULT_MEASURES) -> int:
     """Write ``targets`` (``[(session, tag, dest)]``) in ``jobs`` local worker processes; print
     what ``inspector export`` prints, in the targets' order; returns how many failed."""
-    printer = _OutcomePrinter(targets, views, limit_margin_deg, use_cache, outcome_source)
+    printer = _OutcomePrinter(targets, views, limit_margin_deg, use_cache, outcome_source, measures)
     if not printer.jobs:
         return printer.failed
     printer.bar = progress_bar(len(printer.jobs), "export", unit="rollout")
@@ -146,7 +151,7 @@ class _OutcomePrinter:
     """
 
     def __init__(self, targets: Sequence[tuple], views: Sequence[str] | None, limit_margin_deg: float,
-                 use_cache: bool, outcome_source: str | None = None) -> None:
+                 use_cache: bool, outcome_source: str | None = None, measures: MeasureSettings = DEFAULT_MEASURES) -> None:
         self.failed = 0
         self.jobs: list[ExportJob] = []
         self.bar: Any = None
@@ -160,7 +165,7 @@ class _OutcomePrinter:
             self.jobs.append(ExportJob(str(session.root), tag, os.path.abspath(dest),
                                        None if views is None else tuple(views),
                                        session.gt_source.get("dataset"), limit_margin_deg, use_cache,
-                                       outcome_source))
+                                       outcome_source, measures))
 
     def show(self, outcome: ExportOutcome) -> None:
         warn_once(outcome.cache_warning)

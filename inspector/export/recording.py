@@ -32,6 +32,7 @@ from typing import cast
 import numpy as np
 import rerun as rr
 
+from ..analysis.measure_settings import DEFAULT_MEASURES, MeasureSettings
 from ..analysis.timeline import RolloutTimeline, build_timeline
 from ..cache import rollout_key
 from ..data.session import ROLLOUT_FILE
@@ -221,7 +222,7 @@ def compute_psnr(tl: RolloutTimeline, views: Sequence[str],
 def cached_video_metrics(tl: RolloutTimeline, cache) -> Iterator[None]:
     """Give ``tl`` the video metrics the metrics cache holds for it; keep the ones computed
     meanwhile there (a rollout the app or ``report`` has seen exports without decoding)."""
-    key = rollout_key(tl.rollout, tl.gt, tl.limit_margin_deg)
+    key = rollout_key(tl.rollout, tl.gt, tl.limit_margin_deg, tl.measures)
     cached = read_entry(cache, key)
     known = {v: vm for v, vm in cached.video.items() if v in tl.video_views()}
     for vm in known.values():
@@ -234,11 +235,11 @@ def cached_video_metrics(tl: RolloutTimeline, cache) -> Iterator[None]:
 
 def export_rollout(rollout, dest: Path, views: Sequence[str] | None, limit_margin_deg: float, cache,
                    progress: Callable[[float, str], None] | None = None,
-                   outcome_source: str | None = None) -> Path:
+                   outcome_source: str | None = None, measures: MeasureSettings = DEFAULT_MEASURES) -> Path:
     """Write one rollout's recording at ``dest``: its timeline, with video metrics through
     ``cache`` (:class:`inspector.cache.MetricsCache`); of ``views``, those it has (default: all);
     its outcome as ``outcome_source`` has it (None: the precedence rule)."""
-    tl = build_timeline(rollout, limit_margin_deg=limit_margin_deg)
+    tl = build_timeline(rollout, limit_margin_deg=limit_margin_deg, measures=measures)
     rollout_views = None if views is None else [v for v in views if v in tl.rollout.views or v in tl.gt.views]
     with cached_video_metrics(tl, cache):
         return write_recording(tl, dest, views=rollout_views, progress=progress, outcome_source=outcome_source)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import rerun as rr
 
-from ..analysis.sanity import sanity_measures
+from ..analysis.sanity import rollout_seams, sanity_measures
 from ..analysis.timeline import RolloutTimeline
 from . import layout as L
 from .series import IndexesFor, log_series
@@ -20,20 +20,20 @@ def log_sanity(rec: rr.RecordingStream, tl: RolloutTimeline, indexes_for: Indexe
     """The measures of ``tl`` (its video metrics as computed so far feed the degradation)."""
     m = sanity_measures(tl, tl.known_video_metrics())
     events: list[tuple[int, str, str]] = []
-    seams = m["seams"]
-    if seams is not None and seams["jump_deg"]:
+    seams = rollout_seams(tl)  # every seam's jump (the report row keeps the flagged ones)
+    if seams is not None and len(seams.jump_norm):
         at = np.minimum(tl.chunk_start_step[1:], tl.n_steps - 1)
-        log_series(rec, f"{SEAMS}/jump", at, seams["jump_deg"], indexes_for, "seam jump [deg]",
+        log_series(rec, f"{SEAMS}/jump", at, np.round(seams.jump_norm, 4), indexes_for, "seam jump [deg]",
                    (31, 119, 180, 255), points=True)
-        log_series(rec, f"{SEAMS}/threshold", at[[0, -1]], [seams["threshold_deg"]] * 2, indexes_for,
+        log_series(rec, f"{SEAMS}/threshold", at[[0, -1]], [round(seams.threshold, 4)] * 2, indexes_for,
                    "flagged above [deg]", (120, 120, 120, 255), width=1.0)
-        flagged = np.array(seams["flagged"], dtype=np.int64)
+        flagged = seams.chunk[seams.flagged]
         if flagged.size:
             steps = np.minimum(tl.chunk_start_step[flagged], tl.n_steps - 1)
             log_series(rec, f"{L.MARKERS}/seam_flagged", steps, np.zeros(len(steps)), indexes_for,
                        "seam jump flagged", L.LIMIT_RGBA, points=True, marker="asterisk", marker_size=8.0)
-            events += [(int(s), f"seam: chunk {k} jumps {seams['jump_deg'][k - 1]:.1f} deg from chunk {k - 1}'s "
-                                f"last executed action (flagged above {seams['threshold_deg']:.1f})", "WARN")
+            events += [(int(s), f"seam: chunk {k} jumps {seams.jump_norm[k - 1]:.1f} deg from chunk {k - 1}'s "
+                                f"last executed action (flagged above {seams.threshold:.1f})", "WARN")
                        for k, s in zip(flagged, steps)]
     c = m["completion"]
     if c is not None and c["step"] is not None:

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from ..analysis.latents import latents_summary
+from ..analysis.measure_settings import DEFAULT_MEASURES, MeasureSettings
 from ..analysis.video_action import median_lag_label
 from ..cache import warn_once
 from ..data.episodes import episode_tag
@@ -42,7 +43,8 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
                  use_cache: bool = True, limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG,
                  cache_dir: str | None = None, progress: bool | None = None,
                  ray: str | None = None, calibration: str | None = None,
-                 outcome_source: str | None = None) -> dict[str, Any]:
+                 outcome_source: str | None = None,
+                 measures: MeasureSettings = DEFAULT_MEASURES) -> dict[str, Any]:
     """Metrics for every rollout under ``paths`` (and every episode of the LeRobot datasets among
     them); what could not be read is listed under ``errors``.
 
@@ -61,6 +63,7 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
         calibration: a GR00T-Dreams dump's calibration (``--calibration``; None: its default).
         outcome_source: the outcome source tables use (``--outcome-source``; None: the precedence
             rule of :func:`inspector.outcomes.effective_outcome`).
+        measures: the sanity measures' tolerances (completion's, the seam flag's).
 
     Returns:
         ``{"rollouts", "aggregate", "prompt_divergence"?, "episodes"?, "neural_trajectories"?,
@@ -88,7 +91,8 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
             (s, tag) for s in sources.sessions for tag in sorted(s.rollouts))}
         order.update({(str(d.root), episode_tag(e.index)): len(order) + i for i, (d, e) in enumerate(
             (d, e) for d in sources.datasets for e in d.episodes)})
-        tasks: list[Task | EpisodeTask] = [*plan_tasks(sources.sessions, planned, limit_margin_deg, cache_dir, use_cache),
+        tasks: list[Task | EpisodeTask] = [*plan_tasks(sources.sessions, planned, limit_margin_deg, cache_dir, use_cache,
+                                                                      measures),
                                            *plan_episode_tasks(sources.datasets, planned, limit_margin_deg)]
         rows: dict[tuple[str, str], dict[str, Any]] = {}
         bar = _progress_bar(len(order), progress)

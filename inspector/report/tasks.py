@@ -19,6 +19,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, cast
 
+from ..analysis.measure_settings import DEFAULT_MEASURES, MeasureSettings
+from ..analysis.measures_switch import sanity_measures_on
 from ..analysis.timeline import batch_key, build_timeline, build_timelines
 from ..analysis.video_break import clip_quality
 from ..analysis.video_metrics import VideoMetrics, compare_clips
@@ -51,6 +53,7 @@ class Task:
         limit_margin_deg: joint-limit margin [deg].
         cache_dir: the metrics cache directory (None: the default one).
         use_cache: read and write the metrics cache.
+        measures: the sanity measures' tolerances.
     """
 
     session_root: str
@@ -59,6 +62,7 @@ class Task:
     limit_margin_deg: float
     cache_dir: str | None = None
     use_cache: bool = True
+    measures: MeasureSettings = DEFAULT_MEASURES
 
 
 @dataclass(frozen=True)
@@ -101,7 +105,7 @@ class Outcome:
 
 
 def plan_tasks(sessions: Sequence[Any], jobs: int, limit_margin_deg: float, cache_dir: str | None = None,
-               use_cache: bool = True) -> list[Task]:
+               use_cache: bool = True, measures: MeasureSettings = DEFAULT_MEASURES) -> list[Task]:
     """Tasks for every loaded rollout of ``sessions`` (:class:`inspector.data.session.Session`).
 
     Rollouts of one session that start from the same dataset episode and frame, with the same
@@ -122,7 +126,8 @@ def plan_tasks(sessions: Sequence[Any], jobs: int, limit_margin_deg: float, cach
     for (root, _), tags in groups.items():
         override = by_root[root].gt_source.get("dataset")
         for i in range(0, len(tags), per_task):
-            tasks.append(Task(root, tuple(tags[i:i + per_task]), override, limit_margin_deg, cache_dir, use_cache))
+            tasks.append(Task(root, tuple(tags[i:i + per_task]), override, limit_margin_deg, cache_dir, use_cache,
+                              measures))
     return tasks
 
 
@@ -211,7 +216,7 @@ def _look_up(task: Task, session: Any, cache) -> tuple[list[Outcome], list[_Pend
         try:
             rollout = load_session_rollout(session, tag)
             gt = resolve_ground_truth(rollout)
-            key = rollout_key(rollout, gt, task.limit_margin_deg)
+            key = rollout_key(rollout, gt, task.limit_margin_deg, task.measures)
             cached = read_entry(cache, key)
             if cached.row is not None:
                 outcomes.append(Outcome(task.session_root, tag, row=cached.row, cached=True))
@@ -272,7 +277,7 @@ def _compute(batch: list[_Pending], task: Task, cache) -> list[Outcome]:
 
 def _compute_together(batch: list[_Pending], task: Task, cache) -> list[Outcome]:
 
-    timelines = build_timelines([p.rollout for p in batch], batch[0].gt, task.limit_margin_deg)
+    timelines = build_timelines([p.rollout for p in batch], batch[0].gt, task.limit_margin_deg, task.measures)
     for p, tl in zip(batch, timelines):
         p.timeline = tl
         for view, vm in p.video.items():
@@ -302,7 +307,7 @@ def _compute_together(batch: list[_Pending], task: Task, cache) -> list[Outcome]
 def _imagined_only_quality(tl) -> dict[str, Any]:
     """Per-frame no-reference measures of a chained rollout's views that have no GT video (the
     others got theirs in the pass against the GT)."""
-    if tl.kind not in CHAINED_KINDS:
+    if tl.kind not in CHAINED_KINDS or not sanity_measures_on():
         return {}
     return {view: clip_quality(tl.rollout.video(view)) for view in tl.rollout.views if view not in tl.video_views()}
 
