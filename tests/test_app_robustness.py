@@ -652,13 +652,20 @@ from inspector.app._annotations import update_annotation
 root, tag, start, mode = Path(sys.argv[1]), sys.argv[2], int(sys.argv[3]), sys.argv[4]
 stop = int(sys.argv[5]) if len(sys.argv) > 5 else None
 if mode == "half":  # stop with half the new document in the temporary file
-    def dump(obj, fh, **kw):
-        text = json.dumps(obj, **kw)
-        fh.write(text[: len(text) // 2])
-        fh.flush()
-        print("in-write", flush=True)
-        time.sleep(600)
-    json.dump = dump
+    class HalfWritten:  # the temporary file's handle: writes half of what it is given, then hangs
+        def __init__(self, fh):
+            self.fh = fh
+        def __enter__(self):
+            return self
+        def __exit__(self, *exc):
+            return self.fh.__exit__(*exc)
+        def write(self, data):
+            self.fh.write(data[: len(data) // 2])
+            self.fh.flush()
+            print("in-write", flush=True)
+            time.sleep(600)
+    real_fdopen = os.fdopen
+    os.fdopen = lambda fd, *a, **kw: HalfWritten(real_fdopen(fd, *a, **kw))
 elif mode == "before-replace":  # stop with the complete new document not yet in place
     def fsync(fd):
         print("in-write", flush=True)
