@@ -927,7 +927,9 @@ def bench_outcomes(tmp: Path, quick: bool) -> list[Figure]:
                           f"`inspector serve` started to one tab's Overview listing report_{n}'s rollouts with "
                           "metrics, each row's label in its outcome columns and the success rate with its "
                           "interval; peak RSS of the server; cold cache; baseline: the same unlabelled, in "
-                          "the same run"))
+                          f"the same run, in which report_{n}_labelled took {ours.wall_s:.1f} s (the Overview's "
+                          f"rows are report's, computed at nice 10); machine load average "
+                          f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"))
     labelled = _labelled_session(tmp, "labelled", n, labels=True)
     other = _labelled_session(tmp, "labelled_b", n, labels=True)
     cmp = run_process(inspector_cmd("compare", labelled, other, "--json"), env=fresh_cache(tmp))

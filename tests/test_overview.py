@@ -42,7 +42,10 @@ from inspector.cache import MetricsCache
 from inspector.data.lerobot_writer import EpisodeData, write_lerobot_dataset
 from inspector.data.session import SessionWriter
 from inspector.data.sources import BUNDLED_DEMO, open_sources
+from inspector.jobs.pool import default_jobs
 from inspector.outcomes import make_record, store_records
+from inspector.report.tasks import plan_tasks
+from inspector.units import DEFAULT_LIMIT_MARGIN_DEG
 
 DOCS_SCREENSHOT = Path(__file__).resolve().parents[1] / "docs" / "overview.png"
 OFFSET_DEG = 3.0
@@ -104,6 +107,36 @@ def test_rows_are_computed_once_then_listed_from_the_cache(tmp_path, monkeypatch
     again = {r.tag: r for r in second.rows()}
     assert all(again[t].cached for t in rows if t != "bias_elbow")
     assert again["limits_wrist"].summary == rows["limits_wrist"].summary
+
+
+@pytest.mark.slow
+def test_rows_without_video_are_reports_rows_computed_by_a_worker_per_core(tmp_path):
+    """Rollouts without video (an evaluation's joints against the demo's GT episode) are computed
+    as ``report`` computes them, in report's tasks on one worker per core: every row equals
+    ``report --json``'s row of the same rollout."""
+    base = np.load(BUNDLED_DEMO / "rollouts" / "overrun_60chunks" / "actions.npy")
+    rng = np.random.default_rng(3)
+    session = tmp_path / "eval"
+    with SessionWriter.create(session, name="eval", dataset=str(BUNDLED_DEMO / "dataset")) as w:
+        for i in range(24):
+            w.add_rollout(f"ep000_{i:04d}", kind="autoregressive", episode_index=0, start_frame=0,
+                          actions=base + rng.normal(scale=0.3, size=base.shape).cumsum(axis=0),
+                          prompt="Pick the red cube" if i % 2 else "Lift the red cube")
+    rows = OverviewRows(_catalog([session], MetricsCache(tmp_path / "cache")))
+    tasks, workers = rows._plan()
+    assert workers == default_jobs() and len(tasks) == len(plan_tasks(list(rows._sessions.values()), workers, DEFAULT_LIMIT_MARGIN_DEG))
+    rows.start()
+    assert rows.done.wait(ROWS_TIMEOUT_S)
+    assert rows.n_computed == 24 and not [r.error for r in rows.rows() if r.error]
+    done = subprocess.run([sys.executable, "-m", "inspector", "report", str(session), "--json", "--no-cache"],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    reported = {r["tag"]: r for r in json.loads(done.stdout)["rollouts"]}
+    assert len(reported) == 24
+    for row in rows.rows():
+        summary = json.loads(json.dumps(row.summary))  # as --json writes it
+        assert summary == {k: reported[row.tag][k] for k in summary}, row.tag
+        assert summary["time_aligned_drift"]["per_chunk"]  # a computed row, not an empty one
 
 
 def _row(key: str, rmse: float | None, kind: str = "single_chunk", prompt: str = "pick", session: str = "a",

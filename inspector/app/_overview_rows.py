@@ -1,16 +1,19 @@
 """The overview's rows: one summary row per served rollout, computed once and shared by every tab.
 
-Rows come from the report machinery (:mod:`inspector.report.tasks`) and its on-disk metrics cache.
-A first pass takes every row the cache holds, and the rollouts that cannot be read, without
-decoding any video, so a cached evaluation of 1,000 rollouts lists in seconds; a second pass
-computes the rest, a few rollouts per task, and each task's rows appear as it finishes. Only
-summary rows are kept (a few kB each), never timelines or frames.
+Rows come from the report machinery (:mod:`inspector.report.tasks`), as ``report`` computes them:
+the same tasks (rollouts sharing a GT episode together, two tasks per worker), the same worker
+function and the same on-disk metrics cache, in a pool of spawned worker processes (never under
+the server's GIL), so tabs load and scrub smoothly while rows are computed. A worker takes the
+rows the cache holds and computes the others, and each task's rows appear as it finishes: a
+cached evaluation of 1,000 rollouts lists in seconds, an uncached one in about ``report``'s time.
+Only summary rows are kept (a few kB each), never timelines or frames.
 
-The cache pass runs on one daemon thread; rows are computed in one spawned worker process at a
-lower CPU priority (never under the server's GIL), so tabs load and scrub smoothly while rows are
-computed. Stopping the app ends that process at once (the task under way is dropped), and the
-process ends on its own should the app's process end without stopping it. A rollout that fails
-becomes an error row; it never stops the others.
+One worker per core for rollouts without video (what ``report`` uses); one worker where rollouts
+have videos, whose decoders hold clips beside the tabs' frame cache (the server stays under 1 GB
+with 60 such rollouts opened). Workers run at a lower CPU priority than the serving threads.
+Stopping the app ends them at once (the tasks under way are dropped), and they end on their own
+should the app's process end without stopping them. A rollout that fails becomes an error row;
+it never stops the others.
 
 Dataset episodes (served LeRobot datasets) are not listed: their rows measure something else
 (the follower's tracking error) and they open from the picker.
@@ -21,21 +24,22 @@ from __future__ import annotations
 import os
 import signal
 import threading
+from concurrent.futures import as_completed
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from ..cache import warn_once
+from ..jobs.pool import default_jobs, spawn_pool, stop_pool, worker_count
 from ..jobs.pool import init_worker as _init_worker
-from ..jobs.pool import spawn_pool, stop_pool
-from ..report.tasks import Outcome, cached_outcomes, plan_tasks, run_task
+from ..report.tasks import Outcome, Task, plan_tasks, run_task
 from ..units import DEFAULT_LIMIT_MARGIN_DEG
 from ._listeners import Listeners, Notifying
 
-# Rollouts per computing task: tasks of rollouts sharing a GT episode decode its clip once, and
-# smaller tasks show their rows sooner; a few is the balance.
-COMPUTE_TASK_ROLLOUTS = 6
-# How much less CPU priority (nice) the computing thread takes than the serving threads.
+# Rollouts per task where rollouts have videos: tasks of rollouts sharing a GT episode decode its
+# clip once, and smaller tasks show their rows sooner; a few is the balance.
+VIDEO_TASK_ROLLOUTS = 6
+# How much less CPU priority (nice) the computing workers take than the serving threads.
 BACKGROUND_NICENESS = 10
 
 
@@ -138,8 +142,8 @@ class OverviewRows(Notifying):
         self._thread.start()
 
     def stop(self) -> None:
-        """Stop computing; returns once the worker process has ended (the task under way is
-        dropped with its rows: the app is going). No worker starts afterwards: the pool is made
+        """Stop computing; returns once the worker processes have ended (the tasks under way are
+        dropped with their rows: the app is going). No worker starts afterwards: the pool is made
         under the lock, after a last look at the stop flag, and a worker that its first job is
         starting as this runs is waited for (:func:`~inspector.jobs.pool.stop_pool`), as is one
         that the computing thread is letting go after the last row."""
@@ -150,42 +154,41 @@ class OverviewRows(Notifying):
             stop_pool(pool, grace_s=0)  # no grace: a killed cache write never leaves an entry
 
     def _run(self) -> None:
-
-        _lower_priority()
+        _lower_priority()  # this thread only collects rows (and redraws tabs); the workers compute
         try:
-            tasks = plan_tasks(list(self._sessions.values()), 1, self._margin, self._cache_dir, self._use_cache,
-                               self._measures)
-            to_compute = []
-            for task in tasks:  # first every cached row: the whole table at once
+            tasks, workers = self._plan()
+            with self._lock:
                 if self._stop.is_set():
                     return
-                outcomes, missing = _guarded(task, cached_outcomes, with_missing=True)
-                self._publish(outcomes)
-                self._notify()
-                for i in range(0, len(missing), COMPUTE_TASK_ROLLOUTS):
-                    to_compute.append(replace(task, tags=missing[i:i + COMPUTE_TASK_ROLLOUTS]))
-            if to_compute:
-                # In a worker process: computing in this one would hold the GIL against the
-                # threads that serve the tabs (pages took minutes to load on two busy cores).
-                with self._lock:
-                    if self._stop.is_set():
+                self._pool = pool = spawn_pool(worker_count(workers, len(tasks)), _init_background_worker)
+            try:
+                futures = {pool.submit(run_task, task): task for task in tasks}
+                for future in as_completed(futures):
+                    outcomes = _guarded(futures[future], lambda _: future.result())
+                    if self._stop.is_set():  # stopped meanwhile: its workers were killed
                         return
-                    self._pool = pool = spawn_pool(1, _init_background_worker)
-                try:
-                    for task in to_compute:
-                        outcomes = _guarded(task, lambda t: pool.submit(run_task, t).result())
-                        if self._stop.is_set():  # stopped meanwhile: its worker was killed
-                            return
-                        self._publish(outcomes)
-                        self._notify()
-                finally:
-                    # Forgotten only once its worker has ended: stop() meanwhile waits for it too.
-                    pool.shutdown(wait=True)
-                    with self._lock:
-                        self._pool = None
+                    self._publish(outcomes)
+                    self._notify()
+            finally:
+                # Forgotten only once its workers have ended: stop() meanwhile waits for them too.
+                pool.shutdown(wait=True, cancel_futures=True)
+                with self._lock:
+                    self._pool = None
         finally:
             self.done.set()
             self._notify()
+
+    def _plan(self) -> tuple[list[Task], int]:
+        """The tasks and how many workers run them: ``report``'s plan, one worker per core; where
+        a rollout has videos, one worker and tasks of a few rollouts, which show their rows
+        sooner (a video rollout's row takes about a second)."""
+        sessions = list(self._sessions.values())
+        if not any(r.views or r.gt_views for s in sessions for r in s.rollouts.values()):
+            return (plan_tasks(sessions, default_jobs(), self._margin, self._cache_dir, self._use_cache, self._measures),
+                    default_jobs())
+        tasks = plan_tasks(sessions, 1, self._margin, self._cache_dir, self._use_cache, self._measures)
+        return [replace(t, tags=t.tags[i:i + VIDEO_TASK_ROLLOUTS])
+                for t in tasks for i in range(0, len(t.tags), VIDEO_TASK_ROLLOUTS)], 1
 
     def _publish(self, outcomes) -> None:
         with self._lock:
@@ -206,18 +209,17 @@ class OverviewRows(Notifying):
                     self._rows[key] = replace(row, error=f"{where}{o.error or 'failed'}")
 
 
-def _guarded(task, fn, with_missing: bool = False):
+def _guarded(task, fn):
     """``fn(task)``; anything unforeseen becomes an error outcome for each of its rollouts."""
     try:
         return fn(task)
     except Exception as exc:
-        failed = [Outcome(task.session_root, tag, error_file=str(Path(task.session_root) / "rollouts" / tag),
-                          error=f"cannot compute its row ({type(exc).__name__}: {exc})") for tag in task.tags]
-        return (failed, ()) if with_missing else failed
+        return [Outcome(task.session_root, tag, error_file=str(Path(task.session_root) / "rollouts" / tag),
+                        error=f"cannot compute its row ({type(exc).__name__}: {exc})") for tag in task.tags]
 
 
 def _init_background_worker() -> None:
-    """The computing worker: a report worker at the computing thread's lower CPU priority, which
+    """A computing worker: a report worker at the computing thread's lower CPU priority, which
     Ctrl-C leaves alone (the app stops it; at a terminal, Ctrl-C reaches every process of the
     group). Started by that thread, the worker has its niceness already on Linux: it is not added
     twice (nice 19, all but stopped on busy cores)."""
