@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import shutil
 import time
 from collections.abc import Callable, Sequence
@@ -59,9 +60,23 @@ def wait_until(condition: Callable[[], object], timeout: float = SCENE_TIMEOUT_S
         time.sleep(interval)
 
 
-def open_app(page, url: str) -> None:
+# The pixel ratio the app's 3D canvas is drawn at in tests (viser's ``fixedDpr`` URL setting):
+# SwiftShader's time goes on pixels, and a page busy drawing a frame answers no input; at a
+# quarter of the pixels every step, click and key of a test is answered sooner. Tests about the
+# picture itself open the page at the full ratio (``full_resolution``).
+TEST_DPR = os.environ.get("INSPECTOR_TEST_DPR", "0.5")
+
+
+def app_url(url: str, full_resolution: bool = False) -> str:
+    """``url`` with the tests' canvas pixel ratio (unless ``full_resolution``)."""
+    if full_resolution or not TEST_DPR:
+        return url
+    return f"{url}{'&' if '?' in url else '?'}fixedDpr={TEST_DPR}"
+
+
+def open_app(page, url: str, full_resolution: bool = False) -> None:
     """Load the app and wait until its controls and first video frames are there."""
-    page.goto(url)
+    page.goto(app_url(url, full_resolution))
     page.wait_for_selector("text=SO-101 rollout inspector", timeout=PAGE_TIMEOUT_S * 1000)
     page.wait_for_selector("canvas", timeout=PAGE_TIMEOUT_S * 1000)
 

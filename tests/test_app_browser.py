@@ -50,10 +50,11 @@ def app(tmp_path_factory):
     app.stop()
 
 
-def new_page(browser, app, width: int = 1600, height: int = 1000):
-    """A fresh page on the app and the server-side TabState it got."""
+def new_page(browser, app, width: int = 1600, height: int = 1000, full_resolution: bool = False):
+    """A fresh page on the app and the server-side TabState it got (the 3D canvas at the tests'
+    pixel ratio unless ``full_resolution``: ``browser.TEST_DPR``)."""
     page = open_page(browser, width, height)
-    open_app(page, app.url)
+    open_app(page, app.url, full_resolution)
     return page, page_tab(page, app)
 
 
@@ -321,7 +322,7 @@ def test_screenshot(browser, app, tmp_path):
                     "test_page_loads_and_scene_renders)")
     try:
         for shot_app, tag, docs_path in shots:
-            page, tab = new_page(browser, shot_app)
+            page, tab = new_page(browser, shot_app, full_resolution=True)  # the picture is the point
             hide_software_webgl_notice(page)
             # The richest view: an autoregressive rollout with GT joints if there is one.
             open_in_page(page, tab, shot_app, tag or _pick_rollout(shot_app))
@@ -393,11 +394,6 @@ def test_light_3d_and_the_notes_panel(browser, app):
     label = page.locator("label", has_text=re.compile(r"^Light 3D$")).first
     box = page.locator(f"[id='{label.get_attribute('for')}']")
     assert box.is_checked()
-    box.click()  # the user unticks it
-    wait_until(lambda: tab.controls.light_3d.value is False, what="Light 3D unticked on the server")
-    wait_until(lambda: not tab.hemisphere_light.visible, what="the plain light to go")
-    page.wait_for_timeout(2000)  # the page's script looks every 0.5 s; it ticks once per connection
-    assert tab.controls.light_3d.value is False and not box.is_checked()
     folder = page.get_by_text("Notes", exact=True).first
     folder.click()
     for name in ("Rollout note", "Chunk note", "Flag rollout"):
@@ -429,6 +425,12 @@ def test_light_3d_and_the_notes_panel(browser, app):
         return entry if "0" in entry.get("chunks", {}) else None
     note = wait_until(saved, what="annotations.json to be written")
     assert note["note"] == "grasp slips at chunk 12" and note["chunks"]["0"]["note"] == "cube out of view"
+    # last, as the rest of the page then draws slower: the user unticks Light 3D and it stays so
+    box.click()  # the user unticks it
+    wait_until(lambda: tab.controls.light_3d.value is False, what="Light 3D unticked on the server")
+    wait_until(lambda: not tab.hemisphere_light.visible, what="the plain light to go")
+    page.wait_for_timeout(2000)  # the page's script looks every 0.5 s; it ticks once per connection
+    assert tab.controls.light_3d.value is False and not box.is_checked()
     page.close()
 
 
