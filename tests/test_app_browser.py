@@ -458,7 +458,7 @@ def test_the_camera_is_fitted_to_the_canvas_the_page_has(browser, app):
     again on a resize, but a camera the user has moved stays where the user put it."""
     import numpy as np
 
-    page, tab = new_page(browser, app)
+    page, tab = new_page(browser, app, full_resolution=True)  # the canvas's size in pixels is the point
     open_in_page(page, tab, app, LONG)
     camera = tab.client.camera
 

@@ -309,12 +309,16 @@ def test_the_app_plots_both_gt_times_marks_the_split_and_reads_the_lag(tmp_path:
     _write(tmp_path / "s", np.arange(N_STEPS) + 24, _scene(times), _joints(times))  # 0.8 s ahead
     with _opened_in_app(tmp_path / "s") as (_, tab):
         deadline = time.monotonic() + 60
-        while "front" not in tab.plots.agreements:  # the plots follow the frames' callback
-            assert time.monotonic() < deadline, "no agreement after the video metrics"
+
+        def plotted() -> list[str]:
+            plot = tab.plots.agreement_plot
+            return [] if plot is None else [s["label"] for s in plot.handle.series]
+
+        # the plot is redrawn after the frames' callback has the view's agreement: wait for the lines
+        while "front" not in tab.plots.agreements or "video's GT time, front" not in plotted():
+            assert time.monotonic() < deadline, f"no agreement plotted after the video metrics: {plotted()}"
             time.sleep(0.05)
-        plot = tab.plots.agreement_plot
-        assert plot is not None
-        labels = [s["label"] for s in plot.handle.series]
+        labels = plotted()
         assert "video's GT time, front" in labels and "joints' GT time" in labels
         assert "front: video and actions part (chunk 0)" in labels
         tab.set_step(40, force=True)
