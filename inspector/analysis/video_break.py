@@ -21,6 +21,7 @@ degradation stays above :data:`BREAK_RATIO`.
 
 from __future__ import annotations
 
+import warnings
 from typing import TypedDict
 
 import numpy as np
@@ -146,16 +147,17 @@ def degradation(quality: npt.ArrayLike, frames_per_chunk: int) -> tuple[Array, A
         all NaN when the first chunk has no usable reference.
     """
     q = np.asarray(quality, np.float64).reshape(-1, 3)
-    n = -(-len(q) // max(1, frames_per_chunk))
-    per_chunk = np.full((n, 3), np.nan)
-    for k in range(n):
-        block = q[k * frames_per_chunk:(k + 1) * frames_per_chunk]
-        if k == 0:
-            block = block[1:] if len(block) > 1 else block  # the first frame has no flicker
-        for m in range(3):
-            finite = block[:, m][np.isfinite(block[:, m])]
-            if finite.size:
-                per_chunk[k, m] = float(np.median(finite))
+    fpc = max(1, frames_per_chunk)
+    n = -(-len(q) // fpc)
+    # chunks as rows of a NaN-padded block, so one nanmedian takes every chunk's medians at once
+    blocks = np.full((n * fpc, 3), np.nan)
+    blocks[:len(q)] = np.where(np.isfinite(q), q, np.nan)
+    if len(q) > 1 and fpc > 1:
+        blocks[0] = np.nan  # the first frame has no flicker: chunk 0's medians leave it out
+    blocks = blocks.reshape(n, fpc, 3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN chunk's median is NaN, as meant
+        per_chunk = np.nanmedian(blocks, axis=1) if n else np.full((0, 3), np.nan)
     ref = per_chunk[0] if n else np.full(3, np.nan)
     tiny = 1e-6
     with np.errstate(invalid="ignore", divide="ignore"):
