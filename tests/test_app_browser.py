@@ -50,11 +50,12 @@ def app(tmp_path_factory):
     app.stop()
 
 
-def new_page(browser, app, width: int = 1600, height: int = 1000, full_resolution: bool = False):
+def new_page(browser, app, width: int = 1600, height: int = 1000, full_resolution: bool = False,
+             draw_3d: bool = True):
     """A fresh page on the app and the server-side TabState it got (the 3D canvas at the tests'
-    pixel ratio unless ``full_resolution``: ``browser.TEST_DPR``)."""
+    pixel ratio unless ``full_resolution``: ``browser.TEST_DPR``; never drawn unless ``draw_3d``)."""
     page = open_page(browser, width, height)
-    open_app(page, app.url, full_resolution)
+    open_app(page, app.url, full_resolution, draw_3d)
     return page, page_tab(page, app)
 
 
@@ -77,8 +78,13 @@ def open_in_page(page, tab, app, tag: str) -> None:
     wait_until(tab.loaded.frames.done.is_set, timeout=60, what="the videos to decode")
 
     def shown_as_on_server() -> bool:
-        expected = {f"{p.view}/imagined" for p in tab.pairs if p.imagined} | {
-            f"{p.view}/gt" for p in tab.pairs if p.gt}
+        # under the tab's lock: ``open`` sets ``loaded`` before it shows the new pairs, and until
+        # then the old rollout's pairs would pass for the new one's
+        with tab.lock:
+            if tab.key != k or tab.loaded is None:
+                return False
+            expected = {f"{p.view}/imagined" for p in tab.pairs if p.imagined} | {
+                f"{p.view}/gt" for p in tab.pairs if p.gt}
         return bool(expected) and set(frame_sources(page)) == expected
 
     wait_until(shown_as_on_server, timeout=30, what="the page to show the server's frames")
@@ -102,7 +108,7 @@ def test_page_loads_and_scene_renders(browser, app, tmp_path):
 def test_chunk_slider_play_button_and_step_keys(browser, app):
     """The Chunk slider moves the server's tab and the video (keys and a mouse drag); Play, Pause,
     and the L and PageDown keys step the timeline."""
-    page, tab = new_page(browser, app)
+    page, tab = new_page(browser, app, draw_3d=False)
     open_in_page(page, tab, app, LONG)
     before = frame_sources(page)
     thumb = slider_thumb(page, re.compile(r"^Chunk$"))
@@ -202,7 +208,7 @@ def test_playback_is_a_video_the_browser_presents_at_the_rollout_rate(browser, d
     frames at the clip's rate, where stepping images manages under one a second here (WebGL in
     software). Pause brings back the images of the step playback stopped at."""
     demo = demo_app
-    page, tab = new_page(browser, demo)
+    page, tab = new_page(browser, demo, draw_3d=False)
     open_in_page(page, tab, demo, "prompt_train")
     tab.speed = 0.5  # 15 frames/s and a 29 s clip: time to start on a busy machine
     tab.play()
@@ -256,8 +262,8 @@ def _settled_frames(page, timeout_s: float = 30.0) -> dict[str, str]:
 
 
 def test_two_pages_hold_independent_timelines(browser, app):
-    p1, t1 = new_page(browser, app)
-    p2, t2 = new_page(browser, app)
+    p1, t1 = new_page(browser, app, draw_3d=False)
+    p2, t2 = new_page(browser, app, draw_3d=False)
     open_in_page(p1, t1, app, LONG)
     open_in_page(p2, t2, app, LONG)
     # compare settled frames: until decoding ends, the panel changes from "loading" on its own
@@ -279,7 +285,7 @@ def test_two_pages_hold_independent_timelines(browser, app):
 def test_broken_rollout_shows_error_card_and_a_single_chunk_the_step_slider_only(browser, app):
     """A rollout that fails to load shows its error card and the others still open; a single-chunk
     sample (one chunk) then shows no chunk slider and no prev/next/worst buttons."""
-    page, tab = new_page(browser, app)
+    page, tab = new_page(browser, app, draw_3d=False)
     select_option(page, "Rollout", key(app, BROKEN) + " ⚠")
     card = page.locator(".inspector-error-card")
     card.wait_for(state="visible", timeout=20_000)
@@ -358,7 +364,7 @@ def _pick_rollout(app) -> str:
 def test_compare_shows_the_second_rollouts_video(browser, app):
     """Training vs novel prompt: the compared rollout's imagined frames show beside the first's,
     for every view, in the page."""
-    page, tab = new_page(browser, app)
+    page, tab = new_page(browser, app, draw_3d=False)
     open_in_page(page, tab, app, TRAIN)
     page.get_by_text("Compare", exact=True).first.click()  # the folder starts closed
     select_option(page, "Compare with", key(app, NOVEL))
@@ -533,7 +539,7 @@ def test_labels_made_by_keyboard_are_in_report_from_another_process(browser, app
     import subprocess
     import sys
 
-    page, tab = new_page(browser, app)
+    page, tab = new_page(browser, app, draw_3d=False)
     session_root = next(e.session.root for e in app.catalog.entries.values() if e.session is not None)
     outcomes = session_root / "outcomes.json"
     outcomes.unlink(missing_ok=True)  # a clean slate (a rerun finds the last try's labels)

@@ -33,7 +33,16 @@ import traceback
 from pathlib import Path
 
 import pytest
-from browser import PAGE_TIMEOUT_S, app_url, frame_sources, open_page, skip_reason, slider_thumb, wait_until
+from browser import (
+    PAGE_TIMEOUT_S,
+    SCENE_OFF_SCREEN_JS,
+    app_url,
+    frame_sources,
+    open_page,
+    skip_reason,
+    slider_thumb,
+    wait_until,
+)
 from test_app import (  # noqa: F401  (app and sessions are fixtures)
     BROKEN,
     CARRIED_GT,
@@ -132,6 +141,7 @@ def test_four_browser_pages_hold_their_own_timelines(browser, app, server_errors
     for n in range(len(plan)):
         page = open_page(browser, WIDTH, HEIGHT)
         page.on("pageerror", lambda exc, n=n: page_errors.append(f"page {n}: {exc}"))
+        page.add_init_script(SCENE_OFF_SCREEN_JS)  # timelines, not the 3D view (see browser.open_app)
         page.goto(app_url(app.url))
         pages.append(page)
     for page in pages:  # (what browser.open_app waits for)

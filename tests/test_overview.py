@@ -283,10 +283,11 @@ def demo_pair_app(tmp_path_factory):
     app.stop()
 
 
-def _open(browser, app, width: int = 1600, height: int = 1000):
-    """A page on the app once the overview shows every row with its metrics, and its tab."""
+def _open(browser, app, width: int = 1600, height: int = 1000, draw_3d: bool = False):
+    """A page on the app once the overview shows every row with its metrics, and its tab (the 3D
+    view, which the Overview covers, never drawn unless ``draw_3d``)."""
     page = open_page(browser, width, height)
-    open_app(page, app.url)
+    open_app(page, app.url, draw_3d=draw_3d)
     assert app.overview_rows.done.wait(ROWS_TIMEOUT_S), "overview rows still computing"
     page.wait_for_selector("table.ov-table")
     wait_until(lambda: page.locator("table.ov-table tr.pending").count() == 0, what="every row drawn computed")
@@ -411,7 +412,7 @@ def test_rollouts_are_listed_with_the_broken_one_as_an_error_row(browser, tmp_pa
 @pytest.mark.slow
 def test_overview_screenshot(browser, demo_app, tmp_path):
     """The demo's overview; refreshes docs/overview.png when INSPECTOR_DOCS_SCREENSHOT=1."""
-    page, tab = _open(browser, demo_app)
+    page, tab = _open(browser, demo_app, draw_3d=True)
     hide_software_webgl_notice(page)
     page.locator(".inspector-overview figure#drift svg.chart").first.wait_for(state="visible")
     page.wait_for_timeout(1000)  # let the layout settle

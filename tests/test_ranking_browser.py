@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from browser import app_url, open_page, skip_reason, wait_until
+from browser import SCENE_OFF_SCREEN_JS, app_url, open_page, skip_reason, wait_until
 
 from inspector.app import serve
 from inspector.data.session import SessionWriter
@@ -60,6 +60,7 @@ def test_blind_votes_by_keys_rank_the_planted_worse_checkpoint_last(tmp_path, br
     app = serve([good, worse], port=0, block=False, ab=True)
     try:
         page = open_page(browser, 1400, 900)
+        page.add_init_script(SCENE_OFF_SCREEN_JS)  # votes and figures, not the 3D view (see browser.open_app)
         page.goto(app_url(app.url))
         page.wait_for_selector("[data-ab-pair='1'] [data-ab-side='B'] video")
         for side in ("A", "B"):  # each side's arm: six joint lines drawn
