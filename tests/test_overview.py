@@ -278,7 +278,8 @@ def demo_pair_app(tmp_path_factory):
     """The demo and its planted copy, served together, every row computed."""
     copy = _demo_copy(tmp_path_factory.mktemp("overview") / "checkpoint_b", "checkpoint_b", OFFSET_TAGS)
     app = serve([BUNDLED_DEMO, copy], port=0, block=False)
-    app.overview_rows.start()
+    # computing starts with the server, before any tab connects
+    assert app.overview_rows.done.wait(ROWS_TIMEOUT_S), "the rows did not start with the server"
     yield app
     app.stop()
 

@@ -29,7 +29,7 @@ import pytest
 from inspector.app import HeadlessClient, serve
 from inspector.data.session import SessionWriter
 from inspector.data.sources import BUNDLED_DEMO
-from inspector.jobs.pool import spawn_pool, stop_pool
+from inspector.jobs.pool import init_background_worker, spawn_pool, stop_pool
 
 pytestmark = pytest.mark.slow
 
@@ -339,6 +339,24 @@ def test_stop_pool_ends_a_worker_that_a_submit_is_starting():
             w.join()
     assert started, "no worker was started: nothing was tested"
     assert not left, f"running after stop_pool returned: {left}"
+
+
+def test_the_overviews_workers_load_what_reports_do_at_a_lower_priority():
+    """A worker of the app's overview imports no part of the app (a spawned worker imports its
+    initializer's module: it once imported viser and every app module), has numpy's BLAS on one
+    thread, and runs at nice 10."""
+    pool = spawn_pool(1, init_background_worker, (10,))
+    try:
+        # eval: a builtin, so the worker imports nothing of this module to run the job
+        loaded, blas_threads, nice = pool.submit(eval, "(sorted(__import__('sys').modules.keys() & "
+                                                 "{'viser', 'inspector.app', 'trimesh'}), "
+                                                 "__import__('os').environ.get('OPENBLAS_NUM_THREADS'), "
+                                                 "__import__('os').nice(0))").result(timeout=START_TIMEOUT_S)
+    finally:
+        stop_pool(pool)
+    assert loaded == []
+    assert blas_threads == "1"
+    assert nice >= 10
 
 
 def test_stopping_the_overview_as_it_lets_its_worker_go_waits_for_that_worker(monkeypatch):

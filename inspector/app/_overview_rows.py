@@ -22,7 +22,6 @@ Dataset episodes (served LeRobot datasets) are not listed: their rows measure so
 from __future__ import annotations
 
 import os
-import signal
 import threading
 from concurrent.futures import as_completed
 from dataclasses import dataclass, replace
@@ -30,8 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from ..cache import warn_once
-from ..jobs.pool import default_jobs, spawn_pool, stop_pool, worker_count
-from ..jobs.pool import init_worker as _init_worker
+from ..jobs.pool import default_jobs, init_background_worker, spawn_pool, stop_pool, worker_count
 from ..report.tasks import Outcome, Task, plan_tasks, run_task
 from ..units import DEFAULT_LIMIT_MARGIN_DEG
 from ._listeners import Listeners, Notifying
@@ -160,7 +158,8 @@ class OverviewRows(Notifying):
             with self._lock:
                 if self._stop.is_set():
                     return
-                self._pool = pool = spawn_pool(worker_count(workers, len(tasks)), _init_background_worker)
+                self._pool = pool = spawn_pool(worker_count(workers, len(tasks)), init_background_worker,
+                                               (BACKGROUND_NICENESS,))
             try:
                 futures = {pool.submit(run_task, task): task for task in tasks}
                 for future in as_completed(futures):
@@ -169,14 +168,22 @@ class OverviewRows(Notifying):
                         return
                     self._publish(outcomes)
                     self._notify()
+                self._finish()  # every row is in: tabs draw the last ones now, not once workers exit
             finally:
                 # Forgotten only once its workers have ended: stop() meanwhile waits for them too.
                 pool.shutdown(wait=True, cancel_futures=True)
                 with self._lock:
                     self._pool = None
         finally:
+            self._finish()
+
+    def _finish(self) -> None:
+        """Set ``done`` and tell the listeners (once)."""
+        with self._lock:
+            if self.done.is_set():
+                return
             self.done.set()
-            self._notify()
+        self._notify()
 
     def _plan(self) -> tuple[list[Task], int]:
         """The tasks and how many workers run them: ``report``'s plan, one worker per core; where
@@ -216,19 +223,6 @@ def _guarded(task, fn):
     except Exception as exc:
         return [Outcome(task.session_root, tag, error_file=str(Path(task.session_root) / "rollouts" / tag),
                         error=f"cannot compute its row ({type(exc).__name__}: {exc})") for tag in task.tags]
-
-
-def _init_background_worker() -> None:
-    """A computing worker: a report worker at the computing thread's lower CPU priority, which
-    Ctrl-C leaves alone (the app stops it; at a terminal, Ctrl-C reaches every process of the
-    group). Started by that thread, the worker has its niceness already on Linux: it is not added
-    twice (nice 19, all but stopped on busy cores)."""
-    try:
-        os.nice(max(0, BACKGROUND_NICENESS - os.nice(0)))
-    except (AttributeError, OSError):
-        pass
-    _init_worker()
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _lower_priority() -> None:

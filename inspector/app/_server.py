@@ -74,13 +74,17 @@ class InspectorApp:
         self.catalog = Catalog(sources, self._decoder, self.joint_links, self.frame_cache,
                                metrics_cache if metrics_cache is not None else MetricsCache(), self._matcher,
                                outcome_source=outcome_source, measures=measures)
-        # summary rows of every rollout for the overview, computed once when a tab first shows it
+        # Summary rows of every rollout for the overview, computed once for every tab. Where a tab
+        # opens on the overview (more than one rollout), computing starts with the server: the
+        # workers start and read their rollouts while the first tab is built, rather than after.
         self.overview_rows = OverviewRows(self.catalog)
         self.server = viser.ViserServer(host=host, port=port, label="inspector", verbose=False)
         self.server.initial_camera.position = (0.40, -0.32, 0.28)
         self.server.initial_camera.look_at = (0.10, 0.0, 0.10)
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
+        if not ab and len(self.overview_rows) > 1:  # once the server is up: nothing below can fail
+            self.overview_rows.start()
 
     @property
     def port(self) -> int:

@@ -235,6 +235,23 @@ def init_worker() -> None:
     metrics.KDTREE_WORKERS = 1
 
 
+def init_background_worker(niceness: int) -> None:
+    """A worker computing in the background of a serving process (the app's overview): a report
+    worker at CPU priority ``niceness``, which Ctrl-C leaves alone (its owner stops it; at a
+    terminal, Ctrl-C reaches every process of the group). Started by a thread already at that
+    niceness, the worker has it already on Linux: it is not added twice (nice 19, all but stopped
+    on busy cores).
+
+    It lives here, beside :func:`init_worker`, because a spawned worker imports the module of its
+    initializer before running it: from the app's modules that import was the whole app (viser,
+    meshes; ~1.4 s of CPU and ~100 MB per worker), and numpy loaded before :func:`init_worker`
+    could give it one thread, so each worker's BLAS threads spun against the other's."""
+    with suppress(AttributeError, OSError):
+        os.nice(max(0, niceness - os.nice(0)))
+    init_worker()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def default_jobs() -> int:
     """The cores this process may use."""
     try:
