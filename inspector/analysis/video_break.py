@@ -150,14 +150,13 @@ def degradation(quality: npt.ArrayLike, frames_per_chunk: int) -> tuple[Array, A
     fpc = max(1, frames_per_chunk)
     n = -(-len(q) // fpc)
     # chunks as rows of a NaN-padded block, so one nanmedian takes every chunk's medians at once
-    blocks = np.full((n * fpc, 3), np.nan)
-    blocks[:len(q)] = np.where(np.isfinite(q), q, np.nan)
+    padded = np.full((n * fpc, 3), np.nan)
+    padded[:len(q)] = np.where(np.isfinite(q), q, np.nan)
     if len(q) > 1 and fpc > 1:
-        blocks[0] = np.nan  # the first frame has no flicker: chunk 0's medians leave it out
-    blocks = blocks.reshape(n, fpc, 3)
+        padded[0] = np.nan  # the first frame has no flicker: chunk 0's medians leave it out
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN chunk's median is NaN, as meant
-        per_chunk = np.nanmedian(blocks, axis=1) if n else np.full((0, 3), np.nan)
+        per_chunk = np.nanmedian(padded.reshape(n, fpc, 3), axis=1) if n else np.full((0, 3), np.nan)
     ref = per_chunk[0] if n else np.full(3, np.nan)
     tiny = 1e-6
     with np.errstate(invalid="ignore", divide="ignore"):
