@@ -417,3 +417,21 @@ def test_the_schema_check_says_where_a_value_departs(warm_cache: Path) -> None:
     }
     for expected, value in cases.items():
         assert mismatch(value, MetricsEntry) == expected
+
+
+def test_joint_coherence_without_a_joints_offset_is_a_miss(warm_cache: Path) -> None:
+    """Its readers look up the offset of every joint they call out of phase: an entry without
+    one (a joint dropped, or its offset null) is inconsistent, never read."""
+    from inspector.report.entries import is_consistent
+    from inspector.units import JOINT_NAMES
+
+    coherent = [e for e in map(read_back, entry_files(warm_cache)) if e and e["row"] and e["row"]["joint_coherence"]]
+    assert coherent, "no cached row with joint coherence"
+    for entry in coherent:
+        assert is_consistent(entry)
+        j = entry["row"]["joint_coherence"]
+        for joint in JOINT_NAMES:
+            dropped = {**j, "phase_offset_steps": {k: v for k, v in j["phase_offset_steps"].items() if k != joint}}
+            nulled = {**j, "phase_offset_steps": {**j["phase_offset_steps"], joint: None}, "out_of_phase": [joint]}
+            for broken in (dropped, nulled):
+                assert not is_consistent({**entry, "row": {**entry["row"], "joint_coherence": broken}}), joint

@@ -13,6 +13,7 @@ from typing import Any, TypedDict, cast
 
 from ..analysis.video_metrics import VideoMetrics, VideoMetricsRecord
 from ..cache import MetricsCache
+from ..units import JOINT_NAMES
 from .rows import RolloutRow
 
 
@@ -51,7 +52,16 @@ def read_entry(cache: MetricsCache, key: str) -> CachedMetrics:
 def is_consistent(entry: MetricsEntry) -> bool:
     """What the entry's type cannot say: each view's record is its own, and its per-frame series
     (SSIM and the no-reference measures beside PSNR, three of those a frame; the frame match's GT
-    index, confidence and tied runs) are of one length."""
+    index, confidence and tied runs) are of one length; a row's joint coherence has an offset for
+    every joint, in order, and a number for each joint it calls out of phase."""
+    row = entry["row"]
+    coherence = row["joint_coherence"] if row is not None else None
+    if coherence is not None:
+        steps = coherence["phase_offset_steps"]
+        if list(steps) != list(JOINT_NAMES) or list(coherence["phase_offset_s"]) != list(JOINT_NAMES):
+            return False
+        if any(steps.get(joint) is None for joint in coherence["out_of_phase"]):
+            return False
     for view, record in entry["video"].items():
         ssim, match, quality = record["ssim"], record["match"], record["quality"]
         if record["view"] != view or (ssim is not None and len(ssim) != len(record["psnr_db"])):
