@@ -53,10 +53,14 @@ OFFSET_TAGS = ("prompt_train", "single_f000")
 ROWS_TIMEOUT_S = 600.0  # computing every demo row (videos included) on a busy 2-core machine
 
 
-def _demo_copy(dest: Path, name: str, offset_tags=(), broken_tag: str | None = None) -> Path:
-    """A copy of the bundled demo named ``name``: ``offset_tags`` predict OFFSET_DEG more on
-    shoulder_pan; ``broken_tag`` has a truncated actions.npy."""
-    shutil.copytree(BUNDLED_DEMO, dest)
+def _demo_copy(dest: Path, name: str, offset_tags=(), broken_tag: str | None = None,
+               keep: tuple[str, ...] | None = None) -> Path:
+    """A copy of the bundled demo named ``name`` (only the rollouts ``keep`` when given):
+    ``offset_tags`` predict OFFSET_DEG more on shoulder_pan; ``broken_tag`` has a truncated actions.npy."""
+    def left_out(folder: str, names: list[str]) -> list[str]:
+        return [n for n in names if keep is not None and Path(folder).name == "rollouts" and n not in keep]
+
+    shutil.copytree(BUNDLED_DEMO, dest, ignore=left_out)
     meta = json.loads((dest / "session.json").read_text())
     (dest / "session.json").write_text(json.dumps({**meta, "name": name}))
     for tag in offset_tags:
@@ -81,16 +85,18 @@ def _catalog(paths, cache: MetricsCache, outcome_source: str | None = None) -> C
 
 @pytest.mark.slow
 def test_rows_are_computed_once_then_listed_from_the_cache(tmp_path, monkeypatch):
-    session = _demo_copy(tmp_path / "demo", "demo", broken_tag="bias_elbow")
+    # the bad one, the slowed one, one past its joint limits and two single chunks
+    kept = ("bias_elbow", "tempo_0.8x", "limits_wrist", "single_f000", "single_f153")
+    session = _demo_copy(tmp_path / "demo", "demo", broken_tag="bias_elbow", keep=kept)
     cache = MetricsCache(tmp_path / "cache")
     catalog = _catalog([session], cache)
     first = OverviewRows(catalog)
-    assert len(first) == 17 and all(r.pending or r.error for r in first.rows())  # listed before computing
+    assert len(first) == len(kept) and all(r.pending or r.error for r in first.rows())  # listed before computing
     first.start()
     assert first.done.wait(ROWS_TIMEOUT_S)
     rows = {r.tag: r for r in first.rows()}
     assert "actions.npy" in rows["bias_elbow"].error  # one bad rollout: its error row, the rest computed
-    assert first.n_computed == 16 and first.n_cached == 0
+    assert first.n_computed == len(kept) - 1 and first.n_cached == 0
     assert rows["tempo_0.8x"].summary["tempo"] == pytest.approx(0.8, abs=0.05)
 
     # A second app on the same cache lists every row without computing any.
@@ -103,7 +109,7 @@ def test_rows_are_computed_once_then_listed_from_the_cache(tmp_path, monkeypatch
     second = OverviewRows(_catalog([session], cache))
     second.start()
     assert second.done.wait(120)
-    assert second.n_cached == 16 and second.n_computed == 0
+    assert second.n_cached == len(kept) - 1 and second.n_computed == 0
     again = {r.tag: r for r in second.rows()}
     assert all(again[t].cached for t in rows if t != "bias_elbow")
     assert again["limits_wrist"].summary == rows["limits_wrist"].summary
