@@ -6,11 +6,11 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_processes import CommandServer
 from scipy import stats
 
 from inspector.report.compare import compare_reports, pair_rows, paired_summary
@@ -30,9 +30,20 @@ def _row(tag: str, rmse: float | None = 1.0, drift: float | None = None, episode
             "kind": kind, "time_aligned_drift": None if drift is None else {"mean": drift}}
 
 
+_commands: list[CommandServer] = []  # this module's, while it runs
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _command_server():
+    """The commands run as processes forked from one that imported the CLI once."""
+    with CommandServer() as server:
+        _commands.append(server)
+        yield
+        _commands.clear()
+
+
 def _cli(*argv: str | Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "inspector", *map(str, argv)], capture_output=True, text=True,
-                          timeout=900)
+    return _commands[0].run(*argv, timeout=900)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -118,7 +129,7 @@ def worse_copy(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def comparison(worse_copy) -> dict:
-    out = _cli("compare", DEMO, worse_copy, "--json")
+    out = _cli("compare", DEMO, worse_copy, "--json", "--jobs", "1")  # (the pool is not the point here)
     assert out.returncode == 0, out.stderr
     return json.loads(out.stdout)
 
@@ -158,7 +169,7 @@ def test_compare_pairs_a_renamed_rollout_by_its_start(comparison):
 
 
 def test_compare_text_is_a_short_table(worse_copy):
-    out = _cli("compare", DEMO, worse_copy)
+    out = _cli("compare", DEMO, worse_copy, "--jobs", "1")
     assert out.returncode == 0, out.stderr
     lines = out.stdout.splitlines()
     assert any(line.startswith("bias_elbow") and line.rstrip().endswith("A") for line in lines)

@@ -243,6 +243,7 @@ def test_an_interrupted_run_keeps_every_finished_sample(dataset: Path, tmp_path:
         kept = open_session(out)
         assert 2 <= len(kept.rollouts) < 10 and not kept.errors
         assert not [p for p in (out / "rollouts").iterdir() if p.name.startswith(".")]
+        server.delay_s = 0.0  # (the delay only gave the interrupt its window)
         resumed = run_cli("eval", server.url, str(dataset), "-o", str(out), "--samples", "5", "--resume")
     assert resumed.returncode == 0, resumed.stderr
     assert len(open_session(out).rollouts) == 10

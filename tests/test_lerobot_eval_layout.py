@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import base64
 import json
+import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import simplejpeg
+from cli_processes import CommandServer
 from eval_outputs import camera_level, predicted_level, render_level, write_eval
 
 from inspector.analysis.timeline import build_timeline
@@ -31,9 +32,20 @@ pytestmark = pytest.mark.slow  # the CLI as processes and a served app
 TASKS = {("so101_sim", 0): [True, False], ("so101_sim", 1): [True]}
 
 
+_commands: list[CommandServer] = []  # this module's, while it runs
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _command_server():
+    """The commands run as processes forked from one that imported the CLI once."""
+    with CommandServer() as server:
+        _commands.append(server)
+        yield
+        _commands.clear()
+
+
 def cli(*argv) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "inspector", *map(str, argv)], capture_output=True,
-                          text=True, timeout=300)
+    return _commands[0].run(*argv, timeout=300)
 
 
 def expected_radians(values: np.ndarray) -> np.ndarray:
@@ -51,6 +63,15 @@ def level_of(jpeg_uri: str) -> float:
 def evaluation(tmp_path_factory):
     root = tmp_path_factory.mktemp("eval") / "out"
     return root, write_eval(root, TASKS)
+
+
+@pytest.fixture(scope="module")
+def report(evaluation) -> dict:
+    """``report --json`` of the evaluation (in one process: the pool is not the point here)."""
+    root, _ = evaluation
+    out = cli("report", "--json", "--no-cache", "--jobs", "1", root)
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout)
 
 
 @pytest.fixture(scope="module")
@@ -116,11 +137,8 @@ def test_app_draws_both_arms_and_shows_the_frames(evaluation):
         app.stop()
 
 
-def test_report_rows_and_success_rate_per_task(evaluation):
+def test_report_rows_and_success_rate_per_task(evaluation, report):
     root, recorded = evaluation
-    out = cli("report", "--json", "--no-cache", root)
-    assert out.returncode == 0, out.stderr
-    report = json.loads(out.stdout)
     rows = {r["tag"]: r for r in report["rollouts"]}
     rec = recorded["so101_sim_0"][1]
     row = rows["so101_sim_0_ep001"]
@@ -132,13 +150,11 @@ def test_report_rows_and_success_rate_per_task(evaluation):
     by_task = {t["task"]: t for t in report["aggregate"]["success_by_task"]}
     assert by_task["so101_sim_0"]["success_rate"] == 0.5 and by_task["so101_sim_1"]["success_rate"] == 1.0
     assert by_task["so101_sim_0"]["mean_sum_reward"] == pytest.approx(1.5)
-    text = cli("report", "--no-cache", root).stdout
+    text = cli("report", "--no-cache", "--jobs", "1", root).stdout
     assert "so101_sim_0: 1/2 (50%, 95% CI 9-91%)" in text and "Evaluated episodes" in text
 
 
-def test_overview_shows_success_and_filters_failed_episodes(evaluation, tmp_path):
-    root, _ = evaluation
-    report = json.loads(cli("report", "--json", "--no-cache", root).stdout)
+def test_overview_shows_success_and_filters_failed_episodes(report, tmp_path):
     rows = [OverviewRow(key=r["tag"], session="out", tag=r["tag"], kind=r["kind"], prompt=r["prompt"],
                         session_root=tmp_path, summary=r) for r in report["rollouts"]]
     failed = select_rows(rows, Query(kind=FAILED), {})
@@ -211,13 +227,12 @@ BAD = {
 
 
 @pytest.mark.parametrize("case", sorted(BAD))
-def test_bad_input_is_one_line_and_never_takes_the_others_down(case, tmp_path):
+def test_bad_input_is_one_line_and_never_takes_the_others_down(case, evaluation, tmp_path):
     spoil, file, what = BAD[case]
-    root = tmp_path / "out"
-    write_eval(root, TASKS)
+    root = Path(shutil.copytree(evaluation[0], tmp_path / "out"))  # a copy of write_eval(root, TASKS) to spoil
     _edit_info(root, lambda i: i["overall"].update(eval_s=float("nan")))  # lerobot-eval writes NaN: fine
     spoil(root)
-    out = cli("report", "--json", "--no-cache", root)
+    out = cli("report", "--json", "--no-cache", "--jobs", "1", root)
     if case == "not-json":  # eval_info.json itself unreadable: nothing to report, one line
         assert out.returncode == 2 and out.stderr.count("\n") == 1 and file in out.stderr and what in out.stderr
     else:

@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_processes import CommandServer
 from eval_outputs import write_eval
 from scipy import stats
 
@@ -21,9 +21,20 @@ from inspector.outcomes import store_records
 N = 20
 
 
+_commands: list[CommandServer] = []  # this module's, while it runs
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _command_server():
+    """The commands run as processes forked from one that imported the CLI once."""
+    with CommandServer() as server:
+        _commands.append(server)
+        yield
+        _commands.clear()
+
+
 def _cli(*argv: str | Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "inspector", *map(str, argv)], capture_output=True, text=True,
-                          timeout=600)
+    return _commands[0].run(*argv, timeout=600)
 
 
 def _session(root: Path, gt_offset_deg: float = 0.0, n: int = N, prompt: str = "Pick the red cube") -> Path:
@@ -97,13 +108,13 @@ def test_compare_2_of_20_is_no_significant_difference(sessions) -> None:
     a, _, c_root = sessions
     _label(a, [i < 18 for i in range(N)])
     _label(c_root, [True] * N)
-    s = {t["metric"]: t for t in _json("compare", a, c_root)["tests"]}["success"]
+    tests = {t["metric"]: t for t in _json("compare", a, c_root)["tests"]}
+    s = tests["success"]
     assert s["verdict"] == "no significant difference"
     assert s["p"] == pytest.approx(stats.binomtest(2, 2, 0.5).pvalue, abs=1e-9)
     assert s["ci95"][0] < s["mean_diff"] < s["ci95"][1] or s["ci95"][0] <= 0 <= s["ci95"][1]
     assert s["rollouts_needed"] > 20
-    assert {t["metric"]: t for t in _json("compare", a, c_root)["tests"]}["rmse_deg"]["verdict"] == \
-        "no significant difference"  # the same model: same RMSE
+    assert tests["rmse_deg"]["verdict"] == "no significant difference"  # the same model: same RMSE
 
 
 def test_unpaired_success_is_fishers_test(tmp_path) -> None:

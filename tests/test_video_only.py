@@ -12,10 +12,10 @@ from __future__ import annotations
 import json
 import math
 import subprocess
-import sys
 
 import numpy as np
 import pytest
+from cli_processes import CommandServer
 from eval_outputs import PREDICTED_OFFSET, predicted_level, render_level, write_eval
 from test_lerobot_eval_layout import level_of
 
@@ -29,9 +29,20 @@ TASKS = {("pusht", 0): [True, False], ("pusht", 1): [True]}
 STEPS = 24
 
 
+_commands: list[CommandServer] = []  # this module's, while it runs
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _command_server():
+    """The commands run as processes forked from one that imported the CLI once."""
+    with CommandServer() as server:
+        _commands.append(server)
+        yield
+        _commands.clear()
+
+
 def cli(*argv) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "inspector", *map(str, argv)], capture_output=True,
-                          text=True, timeout=300)
+    return _commands[0].run(*argv, timeout=300)
 
 
 @pytest.fixture(scope="module")
@@ -112,7 +123,7 @@ def test_imagined_frame_f_is_compared_with_the_renders_frame_f(session):
 
 
 def test_report_exits_0_with_success_per_task_psnr_per_view_and_null_joints(evaluation):
-    out = cli("report", "--json", "--no-cache", evaluation)
+    out = cli("report", "--json", "--no-cache", "--jobs", "1", evaluation)
     assert out.returncode == 0, out.stderr
     report = json.loads(out.stdout)
     assert len(report["rollouts"]) == 3 and not report.get("errors")
@@ -129,7 +140,7 @@ def test_report_exits_0_with_success_per_task_psnr_per_view_and_null_joints(eval
         np.mean([r["video_psnr_db"]["render"] for r in report["rollouts"]]))
     by_task = {t["task"]: (t["episodes"], t["successes"]) for t in agg["success_by_task"]}
     assert by_task == {"pusht_0": (2, 1), "pusht_1": (1, 1)}
-    text = cli("report", "--no-cache", evaluation).stdout
+    text = cli("report", "--no-cache", "--jobs", "1", evaluation).stdout
     assert "pusht_0: 1/2 (50%, 95% CI 9-91%)" in text and "PSNR render" in text
 
 
@@ -181,7 +192,7 @@ def test_export_writes_the_videos_and_verifies(evaluation, tmp_path):
 def test_compare_pairs_video_only_rows_by_psnr_and_success(evaluation, tmp_path):
     """B's predicted first view is another picture altogether: A wins every pair on PSNR."""
     write_eval(tmp_path / "b", {("pusht", 0): [True, True], ("pusht", 1): [False]}, steps=STEPS, record=False)
-    out = cli("compare", "--json", "--no-cache", evaluation, tmp_path / "b")
+    out = cli("compare", "--json", "--no-cache", "--jobs", "1", evaluation, tmp_path / "b")
     assert out.returncode == 0, out.stderr
     c = json.loads(out.stdout)
     assert len(c["pairs"]) == 3 and c["summary"]["n_compared"] == 0  # no RMSE on either side
@@ -190,5 +201,5 @@ def test_compare_pairs_video_only_rows_by_psnr_and_success(evaluation, tmp_path)
     deltas = [p["delta_video_psnr_db"]["render"] for p in c["pairs"]]
     assert psnr["mean_delta_db"] == pytest.approx(np.mean(deltas)) and max(deltas) < 0
     assert c["success"] == {"n_compared": 3, "both": 1, "only_a": 1, "only_b": 1, "neither": 0}
-    text = cli("compare", "--no-cache", evaluation, tmp_path / "b").stdout
+    text = cli("compare", "--no-cache", "--jobs", "1", evaluation, tmp_path / "b").stdout
     assert "PSNR render over 3 pair(s)" in text and "only A 1, only B 1" in text
