@@ -139,12 +139,38 @@ def _moving_frames(n: int, width: int, height: int):
         yield frame
 
 
+def _looped(clip: Path, out: Path, times: int) -> None:
+    """``clip`` played ``times`` times over, as one MP4: its H.264 packets copied, not encoded
+    again (encoding is most of the cost of a large clip; decoding it is what is being tested)."""
+    import av
+
+    with av.open(str(clip)) as src, av.open(str(out), "w") as dst:
+        video = src.streams.video[0]
+        stream = dst.add_stream_from_template(video)
+        packets = [(bytes(p), p.pts, p.dts, p.duration, p.is_keyframe) for p in src.demux(video) if p.size]
+        span = max(pts + duration for _, pts, _, duration, _ in packets) - min(pts for _, pts, *_ in packets)
+        for k in range(times):  # each repeat starts with the clip's own keyframe
+            for data, pts, dts, duration, keyframe in packets:
+                packet = av.Packet(data)
+                packet.pts, packet.dts, packet.duration = pts + k * span, dts + k * span, duration
+                packet.is_keyframe = keyframe
+                packet.time_base = video.time_base
+                packet.stream = stream
+                dst.mux(packet)
+
+
 @pytest.mark.slow
 def test_a_huge_clip_is_streamed_not_held(tmp_path):
     """200 frames of 2560x1440 (2.2 GB decoded) as imagined and GT video: report and export stay
     far below that, because no clip is ever held whole."""
+    import av
+
     clip = tmp_path / "big.mp4"
-    encode_h264(clip, _moving_frames(200, 2560, 1440), fps=30, preset="ultrafast")
+    encode_h264(tmp_path / "square.mp4", _moving_frames(20, 2560, 1440), fps=30, preset="ultrafast")
+    _looped(tmp_path / "square.mp4", clip, 10)
+    with av.open(str(clip)) as container:
+        video = container.streams.video[0]
+        assert (video.frames, video.width, video.height) == (200, 2560, 1440)
     with SessionWriter.create(tmp_path / "s") as w:
         w.add_rollout("big", kind="autoregressive", actions=np.zeros((23, 24, 6)) + [0, 0, 0, 0, 0, 50],
                       gt_actions=np.zeros((207, 6)) + [0, 0, 0, 0, 0, 50],
@@ -209,6 +235,16 @@ def test_frames_past_8k_are_refused_in_one_line(tmp_path):
 # report: the same numbers however it runs
 
 
+def _demo_copy(where: Path, tags: tuple[str, ...]) -> Path:
+    """A copy of the demo with only the rollouts ``tags`` (its dataset and session file whole)."""
+    import shutil
+
+    session = where / "demo"
+    shutil.copytree(DEMO, session, ignore=lambda d, names: [n for n in names if Path(d).name == "rollouts"
+                                                            and n not in tags])
+    return session
+
+
 def _close(a, b, path: str, rel: float) -> None:
     if isinstance(a, dict):
         assert set(a) <= set(b) | {"worst_chunk", "start_frame", "n_chunks"}, path
@@ -225,10 +261,20 @@ def _close(a, b, path: str, rel: float) -> None:
         assert a == b, path
 
 
-def test_report_gives_the_numbers_it_gave_before_streaming():
+@pytest.fixture(scope="module")
+def demo_reports(tmp_path_factory) -> dict[str, dict]:
+    """The demo's report (at the margin of the all-in-memory version, 0) three ways: one worker
+    filling a metrics cache, two workers without it, two workers from that cache."""
+    cache = str(tmp_path_factory.mktemp("demo-cache"))
+    return {"one": build_report([str(DEMO)], jobs=1, cache_dir=cache, limit_margin_deg=0.0),
+            "two": build_report([str(DEMO)], jobs=2, use_cache=False, limit_margin_deg=0.0),
+            "cached": build_report([str(DEMO)], jobs=2, cache_dir=cache, limit_margin_deg=0.0)}
+
+
+def test_report_gives_the_numbers_it_gave_before_streaming(demo_reports):
     """The demo's report as the previous, all-in-memory version computed it (margin 0 there)."""
     before = json.loads(BEFORE.read_text())
-    now = build_report([str(DEMO)], jobs=2, use_cache=False, limit_margin_deg=0.0)
+    now = demo_reports["two"]
     old_rows = {r["tag"]: r for r in before["rollouts"]}
     # the rollouts the demo had then (video_ahead_1s came later), in the same order
     assert [r["tag"] for r in now["rollouts"] if r["tag"] in old_rows] == list(old_rows)
@@ -247,11 +293,8 @@ def test_report_gives_the_numbers_it_gave_before_streaming():
         assert row["limit_violations"]["by_joint"] == old["limit_violations"]["by_joint"]
 
 
-def test_report_is_the_same_with_one_or_two_workers_and_from_the_cache(tmp_path):
-    one = build_report([str(DEMO)], jobs=1, cache_dir=str(tmp_path / "cache"))
-    two = build_report([str(DEMO)], jobs=2, use_cache=False)
-    cached = build_report([str(DEMO)], jobs=2, cache_dir=str(tmp_path / "cache"))
-    assert one == two == cached
+def test_report_is_the_same_with_one_or_two_workers_and_from_the_cache(demo_reports):
+    assert demo_reports["one"] == demo_reports["two"] == demo_reports["cached"]
 
 
 def test_a_rollouts_numbers_do_not_depend_on_its_batch():
@@ -273,10 +316,7 @@ def test_a_rollouts_numbers_do_not_depend_on_its_batch():
 
 
 def test_metrics_cache_hits_and_invalidates(tmp_path):
-    import shutil
-
-    session = tmp_path / "demo"
-    shutil.copytree(DEMO, session, ignore=shutil.ignore_patterns("single_*"))
+    session = _demo_copy(tmp_path, ("bias_elbow", "tempo_0.8x"))
     task = Task(str(session), ("bias_elbow", "tempo_0.8x"), None, 2.0, str(tmp_path / "cache"))
     first = run_task(task)
     assert [o.cached for o in first] == [False, False]
@@ -294,10 +334,8 @@ def test_metrics_cache_hits_and_invalidates(tmp_path):
 
 
 def test_a_broken_rollout_in_a_batch_fails_alone(tmp_path):
-    import shutil
-
-    session = tmp_path / "demo"
-    shutil.copytree(DEMO, session, ignore=shutil.ignore_patterns("single_*"))
+    # all four share GT episode 0 from frame 0, hence one batch
+    session = _demo_copy(tmp_path, ("bias_elbow", "tempo_0.8x", "limits_wrist", "prompt_train"))
     video = session / "rollouts" / "bias_elbow" / "video" / "wrist.mp4"
     video.write_bytes(video.read_bytes()[:5000])  # truncated: undecodable after a few frames
     report = build_report([str(session)], jobs=1, use_cache=False)

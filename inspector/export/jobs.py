@@ -96,12 +96,20 @@ def export_on_ray(targets: Sequence[tuple], address: str, views: Sequence[str] |
                   limit_margin_deg: float, use_cache: bool, outcome_source: str | None = None,
                   measures: MeasureSettings = DEFAULT_MEASURES) -> int:
     """Write ``targets`` (``[(session, tag, dest)]``) as Ray tasks; print each file written and each
-    error as ``inspector export`` does; returns how many failed."""
+    error as ``inspector export`` does, in the targets' order (each once those before it are done:
+    the same lines whatever finishes first); returns how many failed."""
     printer = _OutcomePrinter(targets, views, limit_margin_deg, use_cache, outcome_source, measures)
     if printer.jobs:
+        position = {job.dest: i for i, job in enumerate(printer.jobs)}
+        finished: dict[int, ExportOutcome] = {}
+        shown = 0
         with ray_workers(address) as workers:
             for job, outcome, lost in workers.imap(run_export_job, printer.jobs):
-                printer.show(cast(ExportOutcome, outcome) if lost is None else ExportOutcome.died(job, lost))
+                finished[position[job.dest]] = (cast(ExportOutcome, outcome) if lost is None
+                                                else ExportOutcome.died(job, lost))
+                while shown in finished:
+                    printer.show(finished.pop(shown))
+                    shown += 1
     return printer.failed
 
 
