@@ -31,6 +31,10 @@ SHUFFLED = ("gripper", "elbow_flex", "shoulder_pan", "wrist_roll", "shoulder_lif
 
 
 def cli(*argv, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    """``inspector *argv`` as a process; reports and exports with ``--jobs 1`` (one worker at most:
+    these tests are about the runs' files, not the pool)."""
+    if argv[0] in ("report", "export"):
+        argv = (*argv, "--jobs", "1")
     return subprocess.run([sys.executable, "-m", "inspector", *map(str, argv)], capture_output=True,
                           text=True, timeout=300, cwd=cwd)
 
@@ -228,19 +232,28 @@ def _rewrite_csv_rows(run: Path, n: int) -> None:
     (run / "predicted_actions.csv").write_text("\n".join(lines[: n + 1]) + "\n")
 
 
-@pytest.mark.parametrize("case", sorted(BAD_RUNS))
-def test_a_bad_run_is_one_line_and_never_takes_the_others_down(case, tmp_path):
-    spoil, file, what = BAD_RUNS[case]
-    root = tmp_path / "runs"
-    write_run(root / "good", 1)
-    write_run(root / "bad", 3, pngs=False)
-    spoil(root / "bad")
-    out = cli("report", "--json", "--no-cache", root)
+@pytest.fixture(scope="module")
+def bad_runs(tmp_path_factory) -> tuple[Path, dict]:
+    """(folder, the JSON report of them all): a folder per case of BAD_RUNS holding a good run and
+    a bad one spoiled so, all reported by one command."""
+    folder = tmp_path_factory.mktemp("bad-runs")
+    for case, (spoil, _, _) in BAD_RUNS.items():
+        write_run(folder / case / "good", 1)
+        write_run(folder / case / "bad", 3, pngs=False)
+        spoil(folder / case / "bad")
+    out = cli("report", "--json", "--no-cache", *(folder / case for case in sorted(BAD_RUNS)))
     assert out.returncode == 0, out.stderr
-    report = json.loads(out.stdout)
-    assert [r["tag"] for r in report["rollouts"]] == ["good"]
-    (tag, error), = report["errors"].items()
-    assert tag.endswith("/bad") and f"{file}: " in error and what in error, error
+    return folder, json.loads(out.stdout)
+
+
+@pytest.mark.parametrize("case", sorted(BAD_RUNS))
+def test_a_bad_run_is_one_line_and_never_takes_the_others_down(case, bad_runs, tmp_path):
+    _, file, what = BAD_RUNS[case]
+    folder, report = bad_runs
+    root = folder / case
+    assert [r["tag"] for r in report["rollouts"] if r["session"] == case] == ["good"]
+    (tag, error), = ((tag, error) for tag, error in report["errors"].items() if tag.split("/")[0] == case)
+    assert tag == f"{case}/bad" and f"{file}: " in error and what in error, error
     imported = cli("import", "dreamzero-offline", root, "-o", tmp_path / "s")
     assert imported.returncode == 2
     assert imported.stderr.count("\n") == 1 and imported.stderr.startswith("error: ")

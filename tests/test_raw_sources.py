@@ -28,6 +28,7 @@ from eval_outputs import write_eval
 from groot_dreams_layout import write_groot_dreams
 from offline_runs import write_run
 
+from inspector.data.importers.dreamzero_offline import import_offline
 from inspector.data.lerobot_writer import EpisodeData, write_lerobot_dataset
 from inspector.data.video import encode_h264
 
@@ -59,6 +60,13 @@ def write_dreamzero(path: Path, episode: int | None = 0) -> None:
     meta = {"prompt": "Pick the red cube", "frames_per_step": 9, **({"episode": episode} if episode is not None else {})}
     (path / "meta.json").write_text(json.dumps(meta))
     encode_h264(path / "rollout_front.mp4", [np.full((64, 96, 3), 9 * i, np.uint8) for i in range(27)], fps=30)
+
+
+def earlier_session(runs: Path, dest: Path) -> None:
+    """A session at ``dest`` imported from the offline runs under ``runs`` (in this process: the
+    import command is what the tests run after it)."""
+    _, errors = import_offline(runs, dest, log=lambda _: None)
+    assert errors == {}
 
 
 def write_dataset(root: Path) -> Path:
@@ -115,7 +123,7 @@ def test_an_import_never_replaces_or_writes_into_its_source(fmt, overlap, tmp_pa
     d = tmp_path
     if overlap != "src-holds-dest":  # an earlier session at d/s, which --overwrite may replace
         write_run(d / "other" / "run", 1, mp4=False)
-        assert cli("import", "dreamzero-offline", d / "other" / "run", "-o", d / "s").returncode == 0
+        earlier_session(d / "other" / "run", d / "s")
     src, dest, files = OVERLAPS[overlap](d)
     SOURCES[fmt](d / "written")
     files.mkdir(parents=True, exist_ok=True)
@@ -132,7 +140,7 @@ def test_an_import_never_replaces_or_writes_into_its_source(fmt, overlap, tmp_pa
 def test_an_import_never_replaces_its_gt_dataset(tmp_path):
     """The GT dataset kept inside the session (as the demo keeps its own): --overwrite refuses."""
     write_run(tmp_path / "runs" / "r", 1, mp4=False, sidecar={"episode": 1})
-    assert cli("import", "dreamzero-offline", tmp_path / "runs", "-o", tmp_path / "s").returncode == 0
+    earlier_session(tmp_path / "runs", tmp_path / "s")
     write_dataset(tmp_path / "s" / "dataset")
     before = tree(tmp_path / "s")
     for fmt in ("dreamzero-offline", "dreamzero-so101"):

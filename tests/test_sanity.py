@@ -33,13 +33,31 @@ TESTS = ["action-chunk fidelity", "latent stability", "joint coherence", "multi-
 
 
 def _cli(*args, cache: Path | None = None) -> subprocess.CompletedProcess:
+    """``inspector *args`` as a process (reports: ``--jobs 1``, computed in that process: these tests
+    are about the measures, not the pool)."""
     env = None
     if cache is not None:
         import os
 
         env = {**os.environ, "INSPECTOR_CACHE_DIR": str(cache)}
+    if args[0] == "report":
+        args = (*args, "--jobs", "1")
     return subprocess.run([sys.executable, "-m", "inspector", *map(str, args)], capture_output=True, text=True,
                           timeout=900, env=env)
+
+
+def _in_process(capsys, *args) -> tuple[int, str, str]:
+    """(exit status, stdout, stderr) of ``inspector *args`` run in this process: for input the
+    command refuses before any work, where starting a process would be most of the test's time."""
+    from inspector.cli import main
+
+    capsys.readouterr()
+    try:
+        code = main([str(a) for a in args])
+    except SystemExit as exc:  # argparse's way out
+        code = exc.code if isinstance(exc.code, int) else 2
+    out = capsys.readouterr()
+    return code, out.out, out.err
 
 
 # ----------------------------------------------------------------------------------------------
@@ -216,7 +234,7 @@ def test_bad_latents_are_one_rollout_s_error(tmp_path):
     assert "latents.npy" in report["errors"]["s/bad"]
 
 
-def test_sanity_config_overrides_a_threshold_and_bad_ones_are_one_line(tmp_path):
+def test_sanity_config_overrides_a_threshold_and_bad_ones_are_one_line(tmp_path, capsys):
     config = tmp_path / "t.json"
     config.write_text(json.dumps({"joint_coherence": {"max_coupling_error_deg": 50}}))
     t = load_thresholds(config)
@@ -226,10 +244,10 @@ def test_sanity_config_overrides_a_threshold_and_bad_ones_are_one_line(tmp_path)
                        ('{"nope": {}}', "nope: unknown test"), ('{"joint_coherence": {"max_coupling_error_deg": "1"}}',
                                                                    "expected a number"), ("[1", "not JSON")):
         config.write_text(text)
-        out = _cli("report", DEMO, "--sanity-config", config)
-        assert out.returncode == 2 and out.stdout == ""
-        lines = out.stderr.strip().splitlines()
-        assert len(lines) == 1 and lines[0].startswith(f"error: {config}: ") and what in lines[0], out.stderr
+        code, stdout, stderr = _in_process(capsys, "report", DEMO, "--sanity-config", config)
+        assert code == 2 and stdout == ""
+        lines = stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith(f"error: {config}: ") and what in lines[0], stderr
 
 
 # ----------------------------------------------------------------------------------------------
@@ -286,10 +304,10 @@ def test_looser_tolerances_complete_sooner_and_flag_fewer_seams_never_read_from_
 @pytest.mark.parametrize("flag,value,what", [("--completion-tol-deg", "-1", "must be 0 or more"),
                                              ("--seam-multiple", "abc", "must be a number"),
                                              ("--completion-hold-s", "nan", "must be a finite number")])
-def test_bad_tolerances_are_one_line(flag, value, what):
-    out = _cli("report", DEMO, flag, value)
-    assert out.returncode == 2 and out.stdout == ""
-    assert out.stderr.strip().splitlines() == [f"error: {flag}: {what} (got {value!r})" if what == "must be a number"
+def test_bad_tolerances_are_one_line(flag, value, what, capsys):
+    code, stdout, stderr = _in_process(capsys, "report", DEMO, flag, value)
+    assert code == 2 and stdout == ""
+    assert stderr.strip().splitlines() == [f"error: {flag}: {what} (got {value!r})" if what == "must be a number"
                                                else f"error: {flag}: {what} (got {value})"]
 
 
@@ -363,6 +381,19 @@ def test_demo_video_break_is_at_the_planted_chunk_only(demo_report):
     for tag, row in rows.items():
         if tag != "video_degrades" and row["kind"] == "autoregressive":
             assert row["video_break"] == {"front": None, "wrist": None}, tag
+
+
+def test_no_demo_rollout_s_video_is_called_frozen(demo_report):
+    """The negative control of the frozen-video check (tests/test_video_action.py), on every rollout
+    of the demo: none of their videos stands still while the joints move."""
+    rows = _rows(demo_report)
+    assert len(rows) == 17
+    for tag, row in rows.items():
+        assert set(row["video_action"]) == {"front", "wrist"}, tag
+        for view, entry in row["video_action"].items():
+            assert entry["frozen"] is not True, (tag, view)
+            if row["kind"] == "autoregressive":  # measured, not merely unknown (a single chunk may match nothing)
+                assert entry["frozen"] is False, (tag, view)
 
 
 def test_demo_sanity_verdict(demo_report):
@@ -443,11 +474,11 @@ def test_demo_html_page_has_the_verdict_the_measures_and_the_break_curves(demo_r
 def test_recording_carries_seams_completion_and_video_break(tmp_path):
     from test_export import Recording, rrd_verify
 
+    from inspector.cli import main
     from inspector.export.layout import CHUNK, MARKERS
 
-    for tag in ("seam_jump", "video_degrades"):
-        out = _cli("export", DEMO, "--rollout", tag, "-o", tmp_path / f"{tag}.rrd", "--no-cache")
-        assert out.returncode == 0, out.stderr
+    for tag in ("seam_jump", "video_degrades"):  # in this process, as the command writes one rollout
+        assert main(["export", str(DEMO), "--rollout", tag, "-o", str(tmp_path / f"{tag}.rrd"), "--no-cache"]) == 0
         rrd_verify(tmp_path / f"{tag}.rrd")
     seam = Recording(tmp_path / "seam_jump.rrd")
     chunks, _ = seam.scalars(f"{MARKERS}/seam_flagged", order_by=CHUNK)

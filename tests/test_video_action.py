@@ -465,11 +465,19 @@ def test_gt_thumbnails_kept_from_an_earlier_window_match_as_a_fresh_read(monkeyp
 # A frozen video: it stands still while the joints move, so its lag is no lag.
 
 
+# The demo rollouts the frozen-video tests look at: prompt_train (whose joints and moving video the
+# planted rollouts start from: the negative control nearest to them), bias_elbow (joints off the GT
+# path) and single_f384 (no frame matches). That no rollout of the whole demo is frozen is checked
+# on the demo's own report (tests/test_sanity.py).
+FROZEN_DEMO_TAGS = ("prompt_train", "bias_elbow", "single_f384")
+
+
 @pytest.fixture(scope="module")
 def demo_frozen(tmp_path_factory) -> Path:
-    """A copy of the demo session with two more rollouts of prompt_train's joints: ``frozen``, its
-    imagined video frozen on its mid-episode frame (with the demo's noise and wobble of an imagined
-    frame over it), and ``paused``, its video held for 5 s mid-way."""
+    """A copy of the demo session (its GT dataset and :data:`FROZEN_DEMO_TAGS`) with two more
+    rollouts of prompt_train's joints: ``frozen``, its imagined video frozen on its mid-episode
+    frame (with the demo's noise and wobble of an imagined frame over it), and ``paused``, its
+    video held for 5 s mid-way."""
     import shutil
 
     from inspector.data.video import VideoClip, encode_h264
@@ -478,7 +486,8 @@ def demo_frozen(tmp_path_factory) -> Path:
     if not (DEMO_DIR / "session.json").is_file():
         pytest.skip("sessions/demo not built (inspector demo --rebuild)")
     root = tmp_path_factory.mktemp("frozen") / "demo"
-    shutil.copytree(DEMO_DIR, root)
+    shutil.copytree(DEMO_DIR, root, ignore=lambda folder, names: [
+        n for n in names if Path(folder) == DEMO_DIR / "rollouts" and n not in FROZEN_DEMO_TAGS])
     rollouts, rng = root / "rollouts", np.random.default_rng(0)
     for tag in ("frozen", "paused"):
         shutil.copytree(rollouts / "prompt_train", rollouts / tag)
@@ -489,8 +498,18 @@ def demo_frozen(tmp_path_factory) -> Path:
                 frames = degrade(np.repeat(frames[mid][None], len(frames), axis=0), rng)
             else:
                 frames[mid:mid + 150] = frames[mid]
-            encode_h264(clip, frames, 30.0)
+            encode_h264(clip, frames, 30.0, preset="ultrafast")  # a fifth of medium's time, and no smoother
+    assert sorted(p.name for p in rollouts.iterdir()) == sorted([*FROZEN_DEMO_TAGS, "frozen", "paused"])
     return root
+
+
+@pytest.fixture(scope="module")
+def frozen_report(demo_frozen: Path, tmp_path_factory) -> tuple[dict, str]:
+    """(the JSON report, its HTML page) of ``demo_frozen``, computed once for the tests that read it."""
+    page = tmp_path_factory.mktemp("frozen-report") / "report.html"
+    out = _report([demo_frozen], "--json", "--html", str(page))
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout), page.read_text()
 
 
 def _report(paths: list[Path], *flags: str) -> subprocess.CompletedProcess:
@@ -499,10 +518,10 @@ def _report(paths: list[Path], *flags: str) -> subprocess.CompletedProcess:
 
 
 @pytest.mark.slow
-def test_a_frozen_video_is_called_frozen_and_has_no_lag(demo_frozen: Path, tmp_path: Path) -> None:
-    out = _report([demo_frozen], "--json", "--html", str(tmp_path / "report.html"))
-    assert out.returncode == 0, out.stderr
-    rows = {r["tag"]: r for r in json.loads(out.stdout)["rollouts"]}
+def test_a_frozen_video_is_called_frozen_and_has_no_lag(frozen_report: tuple[dict, str]) -> None:
+    report, page = frozen_report
+    rows = {r["tag"]: r for r in report["rollouts"]}
+    assert set(rows) == {*FROZEN_DEMO_TAGS, "frozen", "paused"}
     for view in ("front", "wrist"):
         frozen = rows["frozen"]["video_action"][view]
         assert frozen["matched_fraction"] > 0.9  # every frame matches the one it shows...
@@ -513,23 +532,22 @@ def test_a_frozen_video_is_called_frozen_and_has_no_lag(demo_frozen: Path, tmp_p
         paused = rows["paused"]["video_action"][view]
         assert paused["frozen"] is False and abs(paused["lag_s_median"]) < 0.15
         for tag, row in rows.items():
-            if tag != "frozen":  # no rollout of the demo is frozen (single chunks: too short to tell)
+            if tag != "frozen":  # nor is any other (single chunks: too short to tell)
                 assert row["video_action"][view]["frozen"] is not True, (tag, view)
     # the page's lag cells say so, not a number
-    page = (tmp_path / "report.html").read_text()
     row = re.search(r'<tr data-key="\d+"><td class=t>frozen</td>((?:(?!</tr>).)*)</tr>', page, re.S)
     assert row is not None and row.group(1).count(">frozen</td>") == 2, "the frozen rollout's lag cells"
 
 
 @pytest.mark.slow
-def test_the_text_report_and_the_overview_say_frozen_and_no_match(demo_frozen: Path) -> None:
+def test_the_text_report_and_the_overview_say_frozen_and_no_match(frozen_report: tuple[dict, str]) -> None:
     from inspector.app._overview_rows import OverviewRow
     from inspector.app._overview_table import Query, select_rows, table_html
+    from inspector.report.build import format_report
 
-    out = _report([demo_frozen / "rollouts" / "frozen", demo_frozen / "rollouts" / "single_f384"])
-    assert out.returncode == 0, out.stderr
     lines: dict[str, str] = {}
-    for line in out.stdout.splitlines():  # each rollout's first line: the drift table's (the sanity table follows)
+    text = format_report(frozen_report[0])  # what report prints without --json
+    for line in text.splitlines():  # each rollout's first line: the drift table's (the sanity table follows)
         if line.strip():
             lines.setdefault(line.split()[0], line)
     assert lines["frozen"].count(" frozen") == 2  # the two lag columns
