@@ -22,6 +22,8 @@ import tempfile
 import threading
 from pathlib import Path
 
+import pytest
+
 # The forking process: read one JSON request a line, fork a child that runs it, answer the
 # child's exit status. Children are reaped before the next request (one command at a time per
 # server; a test that wants several at once starts several servers).
@@ -124,3 +126,22 @@ class CommandServer:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def module_command_server():
+    """A test module's own :class:`CommandServer`: ``(fixture, run)``. Assign the fixture to a name
+    in the module (an autouse, module-scoped fixture: the server lives while the module's tests
+    run) and call ``run(*argv, **kwargs)`` as :meth:`CommandServer.run`."""
+    servers: list[CommandServer] = []
+
+    @pytest.fixture(scope="module", autouse=True, name="_command_server")
+    def fixture():
+        with CommandServer() as server:
+            servers.append(server)
+            yield server
+            servers.clear()
+
+    def run(*argv: object, **kwargs) -> subprocess.CompletedProcess:
+        return servers[0].run(*argv, **kwargs)
+
+    return fixture, run

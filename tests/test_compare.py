@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_processes import CommandServer
+from cli_processes import module_command_server
 from scipy import stats
 
 from inspector.report.compare import compare_reports, pair_rows, paired_summary
@@ -30,20 +30,12 @@ def _row(tag: str, rmse: float | None = 1.0, drift: float | None = None, episode
             "kind": kind, "time_aligned_drift": None if drift is None else {"mean": drift}}
 
 
-_commands: list[CommandServer] = []  # this module's, while it runs
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _command_server():
-    """The commands run as processes forked from one that imported the CLI once."""
-    with CommandServer() as server:
-        _commands.append(server)
-        yield
-        _commands.clear()
+# the commands run as processes forked from one that imported the CLI once
+_command_server, _run_command = module_command_server()
 
 
 def _cli(*argv: str | Path) -> subprocess.CompletedProcess:
-    return _commands[0].run(*argv, timeout=900)
+    return _run_command(*argv, timeout=900)
 
 
 # ----------------------------------------------------------------------------------------------

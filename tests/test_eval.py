@@ -21,7 +21,7 @@ from inspector.eval.wire import packb
 from inspector.units import JOINT_NAMES
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cli_processes import CommandServer  # noqa: E402
+from cli_processes import module_command_server  # noqa: E402
 from policy_server import DEFAULT_CONFIG, object_array, policy_server, ramp  # noqa: E402
 
 pytestmark = pytest.mark.slow  # policy servers and the eval command as processes
@@ -31,20 +31,12 @@ HORIZON = 24
 DEADLINE_S = 120  # generous: the suite runs on a busy 2-core machine
 
 
-_commands: list[CommandServer] = []  # this module's, while it runs
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _command_server():
-    """The commands run as processes forked from one that imported the CLI once."""
-    with CommandServer() as server:
-        _commands.append(server)
-        yield
-        _commands.clear()
+# the commands run as processes forked from one that imported the CLI once
+_command_server, _run_command = module_command_server()
 
 
 def run_cli(*args: str, timeout: float = DEADLINE_S) -> subprocess.CompletedProcess:
-    return _commands[0].run(*args, timeout=timeout)
+    return _run_command(*args, timeout=timeout)
 
 
 @pytest.fixture(scope="module")

@@ -27,7 +27,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from cli_processes import CommandServer
+from cli_processes import module_command_server
 
 from inspector.data.lerobot_writer import EpisodeData, write_lerobot_dataset
 
@@ -65,20 +65,12 @@ def _env() -> dict[str, str]:
     return {k: v for k, v in os.environ.items() if k != "RUST_LOG"}
 
 
-_commands: list[CommandServer] = []  # this module's, while it runs
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _command_server():
-    """The commands run as processes forked from one that imported the CLI once."""
-    with CommandServer() as server:
-        _commands.append(server)
-        yield
-        _commands.clear()
+# the commands run as processes forked from one that imported the CLI once
+_command_server, _run_command = module_command_server()
 
 
 def inspector(*args: object, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    return _commands[0].run(*args, timeout=300, env=_env(), cwd=cwd)
+    return _run_command(*args, timeout=300, env=_env(), cwd=cwd)
 
 
 def assert_one_line_error(run: subprocess.CompletedProcess, file: str, *words: str) -> str:

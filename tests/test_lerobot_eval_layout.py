@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import simplejpeg
-from cli_processes import CommandServer
+from cli_processes import module_command_server
 from eval_outputs import camera_level, predicted_level, render_level, write_eval
 
 from inspector.analysis.timeline import build_timeline
@@ -32,20 +32,12 @@ pytestmark = pytest.mark.slow  # the CLI as processes and a served app
 TASKS = {("so101_sim", 0): [True, False], ("so101_sim", 1): [True]}
 
 
-_commands: list[CommandServer] = []  # this module's, while it runs
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _command_server():
-    """The commands run as processes forked from one that imported the CLI once."""
-    with CommandServer() as server:
-        _commands.append(server)
-        yield
-        _commands.clear()
+# the commands run as processes forked from one that imported the CLI once
+_command_server, _run_command = module_command_server()
 
 
 def cli(*argv) -> subprocess.CompletedProcess:
-    return _commands[0].run(*argv, timeout=300)
+    return _run_command(*argv, timeout=300)
 
 
 def expected_radians(values: np.ndarray) -> np.ndarray:

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_processes import CommandServer
+from cli_processes import module_command_server
 from eval_outputs import write_eval
 from scipy import stats
 
@@ -21,20 +21,12 @@ from inspector.outcomes import store_records
 N = 20
 
 
-_commands: list[CommandServer] = []  # this module's, while it runs
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _command_server():
-    """The commands run as processes forked from one that imported the CLI once."""
-    with CommandServer() as server:
-        _commands.append(server)
-        yield
-        _commands.clear()
+# the commands run as processes forked from one that imported the CLI once
+_command_server, _run_command = module_command_server()
 
 
 def _cli(*argv: str | Path) -> subprocess.CompletedProcess:
-    return _commands[0].run(*argv, timeout=600)
+    return _run_command(*argv, timeout=600)
 
 
 def _session(root: Path, gt_offset_deg: float = 0.0, n: int = N, prompt: str = "Pick the red cube") -> Path:

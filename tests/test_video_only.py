@@ -15,7 +15,7 @@ import subprocess
 
 import numpy as np
 import pytest
-from cli_processes import CommandServer
+from cli_processes import module_command_server
 from eval_outputs import PREDICTED_OFFSET, predicted_level, render_level, write_eval
 from test_lerobot_eval_layout import level_of
 
@@ -29,20 +29,12 @@ TASKS = {("pusht", 0): [True, False], ("pusht", 1): [True]}
 STEPS = 24
 
 
-_commands: list[CommandServer] = []  # this module's, while it runs
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _command_server():
-    """The commands run as processes forked from one that imported the CLI once."""
-    with CommandServer() as server:
-        _commands.append(server)
-        yield
-        _commands.clear()
+# the commands run as processes forked from one that imported the CLI once
+_command_server, _run_command = module_command_server()
 
 
 def cli(*argv) -> subprocess.CompletedProcess:
-    return _commands[0].run(*argv, timeout=300)
+    return _run_command(*argv, timeout=300)
 
 
 @pytest.fixture(scope="module")
