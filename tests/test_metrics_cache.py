@@ -80,7 +80,8 @@ def inspector(*args: Any, cache: Path | str | None = None, stdout: Path | None =
 
 @pytest.fixture(scope="module")
 def no_cache_report(session: Path) -> str:
-    out = inspector("report", session, "--json", "--no-cache")
+    # in this process; the warm cache's report, in workers, must match it byte for byte
+    out = inspector("report", session, "--json", "--no-cache", "--jobs", "1")
     assert out.returncode == 0 and out.stderr == "", out.stderr
     return out.stdout
 
