@@ -12,6 +12,7 @@ be made.
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 import os
 import shutil
@@ -20,11 +21,13 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from inspector.cache import SCHEMA, decode_entry
+from inspector.data.video import VideoClip, encode_h264
 from inspector.report.entries import MetricsEntry, is_consistent
 from inspector.report.rows import RolloutRow
 from inspector.schema import mismatch
@@ -35,6 +38,9 @@ REPO = Path(__file__).resolve().parents[1]
 DEMO = REPO / "sessions" / "demo"
 # Three rollouts (autoregressive, single-chunk, slowed), each with two views: across two workers.
 ROLLOUTS = ("bias_elbow", "single_f000", "tempo_0.8x")
+# The autoregressive ones cut to their first chunks (of 49): every command here decodes and
+# compares half the video, and the slowed one still reads as slowed (its tempo about 0.8).
+CHUNKS = 24
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +48,20 @@ def session(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("cache") / "demo"
     shutil.copytree(DEMO, root, ignore=lambda d, names: [n for n in names if Path(d).name == "rollouts"
                                                          and n not in ROLLOUTS])
+    for tag in ("bias_elbow", "tempo_0.8x"):
+        _keep_chunks(root / "rollouts" / tag, CHUNKS)
     return root
+
+
+def _keep_chunks(rollout: Path, chunks: int) -> None:
+    """Cut a rollout to its first ``chunks`` chunks: their actions, states and frames."""
+    meta = json.loads((rollout / "rollout.json").read_text())
+    np.save(rollout / "actions.npy", np.load(rollout / "actions.npy")[:chunks])
+    np.save(rollout / "states.npy", np.load(rollout / "states.npy")[:chunks + 1])
+    for view in meta["views"]:
+        video = rollout / "video" / f"{view}.mp4"
+        frames = [rgb for _, rgb in itertools.islice(VideoClip(video).iter_frames(), chunks * meta["frames_per_chunk"])]
+        encode_h264(video, frames, meta["fps"])
 
 
 def inspector(*args: Any, cache: Path | str | None = None, stdout: Path | None = None,
@@ -61,7 +80,8 @@ def inspector(*args: Any, cache: Path | str | None = None, stdout: Path | None =
 
 @pytest.fixture(scope="module")
 def no_cache_report(session: Path) -> str:
-    out = inspector("report", session, "--json", "--no-cache")
+    # in this process; the warm cache's report, in workers, must match it byte for byte
+    out = inspector("report", session, "--json", "--no-cache", "--jobs", "1")
     assert out.returncode == 0 and out.stderr == "", out.stderr
     return out.stdout
 
@@ -82,6 +102,12 @@ def entry_files(cache: Path) -> list[Path]:
 
 def read_back(path: Path) -> dict[str, Any] | None:
     return decode_entry(path.read_bytes(), path.stem, MetricsEntry)
+
+
+@pytest.fixture(scope="module")
+def entry_bytes(warm_cache: Path) -> list[tuple[Path, bytes]]:
+    """Each entry file with its bytes: read once for the properties' hundreds of examples."""
+    return [(path, path.read_bytes()) for path in entry_files(warm_cache)]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -134,17 +160,22 @@ JSON_VALUES = st.recursive(JSON_SCALARS, lambda inner: st.lists(inner, max_size=
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())
-def test_a_corrupted_entry_file_is_a_miss(warm_cache: Path, data: st.DataObject) -> None:
+def test_a_corrupted_entry_file_is_a_miss(entry_bytes: list[tuple[Path, bytes]], data: st.DataObject) -> None:
     """Any change to an entry's bytes (or another rollout's entry under its key) makes it a miss:
     nothing but the record as written is ever read."""
-    files = entry_files(warm_cache)
-    path, other = files[data.draw(st.integers(0, len(files) - 1))], files[0 if files[-1] != files[0] else -1]
-    original = path.read_bytes()
-    corrupted = data.draw(byte_corruptions(original, other.read_bytes() if other != path else b""))
+    (path, original), (other, other_bytes) = entry_bytes[data.draw(st.integers(0, len(entry_bytes) - 1))], entry_bytes[0]
+    corrupted = data.draw(byte_corruptions(original, other_bytes if other != path else b""))
     entry = decode_entry(corrupted, path.stem, MetricsEntry)
     if entry is not None:
         event("unchanged record")
     assert entry is None or entry == read_back(path)
+
+
+@pytest.fixture(scope="module")
+def entry_records(entry_bytes: list[tuple[Path, bytes]]) -> list[tuple[str, bytes, list[tuple]]]:
+    """Each entry's key, record (its bytes after the header) and the paths in it, found once."""
+    records = [(path.stem, data.partition(b"\n")[2]) for path, data in entry_bytes]
+    return [(key, body, _leaves(json.loads(body))) for key, body in records]
 
 
 def _leaves(value: Any, path: tuple = ()) -> list[tuple]:
@@ -169,15 +200,16 @@ def _kind(value: Any) -> str:
 
 @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())
-def test_an_entry_of_the_wrong_shape_is_a_miss(warm_cache: Path, data: st.DataObject) -> None:
+def test_an_entry_of_the_wrong_shape_is_a_miss(entry_records: list[tuple[str, bytes, list[tuple]]],
+                                               data: st.DataObject) -> None:
     """An entry written with a valid header but a record changed anywhere (a value replaced by any
     JSON, a key dropped or added, NaN): read as a miss, or as an entry of the declared types,
     never anything that breaks its readers. A value replaced by one of another JSON type (say a
     string for a number, an integer for a float, an object for a list) is always a miss."""
-    files = entry_files(warm_cache)
-    path = files[data.draw(st.integers(0, len(files) - 1))]
-    record = json.loads(path.read_bytes().partition(b"\n")[2])
-    target = data.draw(st.sampled_from(_leaves(record)))
+    key, body, leaves = entry_records[data.draw(st.integers(0, len(entry_records) - 1))]
+    record = json.loads(body)  # a fresh copy to change
+    # an index, as sampled_from draws one, without labelling (hashing, scanning) every path each time
+    target = leaves[data.draw(st.integers(0, len(leaves) - 1))]
     how = data.draw(st.sampled_from(["replace", "drop", "add", "nan"] if target else ["replace"]))
     event(f"{how} {'.'.join(str(s) for s in target[:2] if not isinstance(s, int))}")
     must_miss = how == "nan"
@@ -204,8 +236,8 @@ def test_an_entry_of_the_wrong_shape_is_a_miss(warm_cache: Path, data: st.DataOb
     else:
         if target and isinstance(_get(record, target[:-1]), (dict, list)):
             _get(record, target[:-1])[target[-1]] = float("nan")
-    crafted = _crafted(path.stem, json.dumps(record).encode())  # NaN written as JSON does not have it
-    entry = decode_entry(crafted, path.stem, MetricsEntry)
+    crafted = _crafted(key, json.dumps(record).encode())  # NaN written as JSON does not have it
+    entry = decode_entry(crafted, key, MetricsEntry)
     if must_miss:
         assert entry is None, (how, target)
     if entry is None or not is_consistent(entry):  # (what read_entry refuses)
@@ -292,7 +324,8 @@ def test_a_bad_entry_is_recomputed_rewritten_and_the_report_is_no_cache_s(
     for corruption, path in zip(corruptions, entry_files(cache)):
         CORRUPTIONS[corruption](path)
         assert path.read_bytes() != originals[path.name], corruption
-    out = inspector("report", session, "--json", cache=cache)
+    # in this process (no pool to start): the entries were written by the warm cache's workers
+    out = inspector("report", session, "--json", "--jobs", "1", cache=cache)
     assert out.returncode == 0 and out.stderr == "", out.stderr
     assert out.stdout == no_cache_report
     for path in entry_files(cache):  # written anew, as the first report wrote it

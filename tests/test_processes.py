@@ -37,7 +37,6 @@ ROLLOUTS = 160  # each 60 chunks with two 540-frame views: minutes of work, stop
 SOURCE = BUNDLED_DEMO / "rollouts" / "overrun_60chunks"
 START_TIMEOUT_S = 240.0  # a command starting, and its workers getting busy, on a loaded 2-core machine
 GONE_TIMEOUT_S = 60.0  # generous: the guarantee is a few seconds
-BUSY_CPU_S = 3.0  # a worker with this much CPU time is past its start-up (about a second) and computing
 
 
 # ----------------------------------------------------------------------------------------------
@@ -130,14 +129,6 @@ def alive(key: tuple[int, float]):
         return None
 
 
-def cpu_s(p) -> float:
-    try:
-        t = p.cpu_times()
-        return t.user + t.system
-    except psutil.Error:
-        return 0.0
-
-
 def wait_until(condition: Callable[[], object], timeout: float, what: str) -> object:
     deadline = time.monotonic() + timeout
     while not (value := condition()):
@@ -155,12 +146,22 @@ def assert_all_gone(descendants: Descendants, what: str) -> None:
         f"  {pid}: {cmd}" for pid, cmd in left.items())
 
 
+def in_a_job(p) -> bool:
+    """The worker has a video open: every job here decodes the rollouts' and their GT's videos,
+    for most of its time, and no worker's start-up opens one. (Seen the moment it is so, where a
+    worker's CPU time, past what its start-up takes, was seen seconds into the job.)"""
+    try:
+        return any(f.path.endswith(".mp4") for f in p.open_files())
+    except psutil.Error:
+        return False
+
+
 def wait_busy(descendants: Descendants, proc: subprocess.Popen | None, workers: int, out: Callable[[], str]) -> None:
-    """Wait until ``workers`` spawned workers are computing (while the command still runs)."""
+    """Wait until ``workers`` spawned workers are in the middle of a job (while the command still runs)."""
     def busy():
         assert proc is None or proc.poll() is None, f"the command ended before it was stopped:\n{out()}"
-        return sum(cpu_s(p) >= BUSY_CPU_S for p in descendants.workers()) >= workers
-    wait_until(busy, START_TIMEOUT_S, f"{workers} busy worker process(es)")
+        return sum(in_a_job(p) for p in descendants.workers()) >= workers
+    wait_until(busy, START_TIMEOUT_S, f"{workers} worker process(es) in a job")
 
 
 def free_port() -> int:
