@@ -46,11 +46,20 @@ _BATCH = 16  # frames measured in one vectorised pass; every clip of a task hold
 # at once (32 clips x 64 frames held 40 MB more a worker; 16 gives the same numbers)
 
 
+_LUMA_WEIGHTS = (np.float32(0.299), np.float32(0.587), np.float32(0.114))
+
+
 def _luma(rgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
     """(H/SUBSAMPLE, W/SUBSAMPLE) luma of an (H, W, 3) frame, every SUBSAMPLE-th pixel."""
-    f = rgb[::SUBSAMPLE, ::SUBSAMPLE].astype(np.float32)
-    # a weighted sum, not ``f @ weights``: a matrix product over this strided copy took 1 ms a frame
-    return 0.299 * f[..., 0] + 0.587 * f[..., 1] + 0.114 * f[..., 2]
+    f = rgb[::SUBSAMPLE, ::SUBSAMPLE]
+    # a weighted sum straight from the bytes, into one float32 array: no float copy of the three
+    # channels first (the same numbers, in under half the time: 56 -> 24 us a 320x176 frame), and
+    # not ``f @ weights``, a matrix product over the strided view (1 ms a frame)
+    r, g, b = _LUMA_WEIGHTS
+    y = f[..., 0] * r
+    y += f[..., 1] * g
+    y += f[..., 2] * b
+    return y
 
 
 def _box3(y: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
