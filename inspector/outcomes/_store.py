@@ -90,10 +90,11 @@ def read_outcomes(path: str | Path) -> OutcomesDocument:
     if problem:
         raise InspectorError(path, f"{problem}; not overwriting it")
     _remember_valid(path, raw)
-    return cast(OutcomesDocument, data)
+    return cast(OutcomesDocument, _with_defaults(data))
 
 
 def _with_defaults(data: dict[str, Any]) -> dict[str, Any]:
+    """A valid document with the keys it may leave out (a file written by hand or by a script)."""
     data.setdefault("failure_tags", [])
     data.setdefault("rollouts", {})
     return data
@@ -131,8 +132,7 @@ def _document_problem(data: Any) -> str | None:
     tags = data.get("failure_tags", [])
     if not isinstance(tags, list) or not all(isinstance(t, str) and TAG_PATTERN.match(t) for t in tags):
         return "failure_tags: expected a list of tags (lower case, digits, _)"
-    data.setdefault("failure_tags", [])
-    rollouts = data.setdefault("rollouts", {})
+    rollouts = data.get("rollouts", {})
     if not isinstance(rollouts, dict):
         return f"rollouts: expected an object, found {shown(rollouts)}"
     known = (*FAILURE_TAGS, *tags)
