@@ -353,7 +353,7 @@ def test_playback_advances_and_stops(app):
     tab.play()
     client.close()  # the tab goes away: its playback thread must stop
     assert tab.closed.wait(10)
-    time.sleep(0.3)
+    wait_until(lambda: not tab.playing, 30)  # close() takes the tab's lock after setting closed
     frozen = tab.step
     time.sleep(0.3)
     assert tab.step == frozen and not tab.playing

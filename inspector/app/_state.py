@@ -522,7 +522,9 @@ class TabState:
         while not self.closed.wait(1.0 / PLAYBACK_FPS):
             now = time.monotonic()
             with self.lock:
-                if generation != self._play_generation or self.loaded is None:
+                # closed is set before close() takes the lock: a tick that got the lock first
+                # must not move a closed tab's step
+                if generation != self._play_generation or self.loaded is None or self.closed.is_set():
                     return
                 tl = self.loaded.timeline
                 clip_step = self.clip_clock.step(now) if self._clip is not None else None
