@@ -86,7 +86,12 @@ def phase_offsets(pred: npt.ArrayLike, gt: npt.ArrayLike | GtMotion, max_lag: in
     sg, sg2 = cg[:, g_hi] - cg[:, g_lo], cg2[:, g_hi] - cg2[:, g_lo]
     var_p, var_g = sp2 - sp * sp / m, sg2 - sg * sg / m
     ok = (var_p > 1e-12 * np.maximum(sp2, 1.0)) & (var_g > 1e-12 * np.maximum(sg2, 1.0))
-    r = np.where(ok, (cross - sp * sg / m) / np.sqrt(np.where(ok, var_p * var_g, 1.0)), -np.inf)
+    # (the square roots apart: joint values of ~1e80 and more, out of any joint's range, would
+    # overflow their product; such a rollout gets a lag, not a warning)
+    with np.errstate(over="ignore", invalid="ignore"):
+        r = np.where(ok, (cross - sp * sg / m) / (np.sqrt(np.where(ok, var_p, 1.0)) * np.sqrt(np.where(ok, var_g, 1.0))),
+                     -np.inf)
+    r = np.nan_to_num(r, nan=-np.inf)
     best = lags[np.argmax(r, axis=1)]
     return [int(b) if mv and k.any() else None for b, mv, k in zip(best, g.moving, ok)]
 
