@@ -15,6 +15,7 @@ import os
 import shutil
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -428,3 +429,44 @@ def test_overview_screenshot(browser, demo_app, tmp_path):
     if os.environ.get("INSPECTOR_DOCS_SCREENSHOT"):
         DOCS_SCREENSHOT.write_bytes(out.read_bytes())
     page.close()
+
+
+@pytest.mark.slow
+def test_the_rollout_behind_the_overview_decodes_no_video_until_it_steps_aside_or_the_rows_are_in(monkeypatch):
+    """The rollouts behind a tab's overview stay undecoded while its rows are computed (held
+    here until released, so nothing else can finish them); hiding the overview starts the
+    shown one, and the last row in starts the one behind another tab's overview."""
+    from test_app import connect
+
+    release = threading.Event()
+    compute = OverviewRows._run
+
+    def held(rows):
+        release.wait(120)
+        compute(rows)
+
+    monkeypatch.setattr(OverviewRows, "_run", held)
+    app = serve([BUNDLED_DEMO], port=0, block=False)
+    clients = []
+    try:
+        client, first = connect(app)
+        clients.append(client)
+        assert first.overview.visible and first.loaded is not None and first.loaded.frames.views
+        assert not first.loaded.frames.started and not first.loaded.frames.decoded.is_set()
+        first.overview.hide()
+        assert first.loaded.frames.started and first.loaded.frames.decoded.wait(120)
+
+        client, second = connect(app)
+        clients.append(client)
+        other = next(k for k in app.catalog.keys() if k != first.key and app.catalog.get(k).error is None)
+        assert second.overview.visible and second.open(other)
+        assert second.loaded is not None and second.loaded.frames.views and not second.loaded.frames.started
+        assert not app.overview_rows.done.is_set()
+        release.set()
+        assert app.overview_rows.done.wait(ROWS_TIMEOUT_S)
+        assert second.loaded.frames.decoded.wait(120)
+    finally:
+        release.set()
+        for client in clients:
+            client.close()
+        app.stop()

@@ -129,8 +129,12 @@ class Catalog:
     def get(self, key: str) -> Entry | None:
         return self.entries.get(key)
 
-    def load(self, key: str) -> Loaded:
+    def load(self, key: str, start_frames: bool = True) -> Loaded:
         """The rollout's shared data, built on first use.
+
+        Args:
+            start_frames: start decoding its videos now (else the caller starts them with
+                ``loaded.frames.start()`` when it shows them; another tab's load may first).
 
         Raises:
             KeyError: ``key`` is not a served rollout.
@@ -141,21 +145,22 @@ class Catalog:
         if entry.error is not None:
             raise entry.error
         with self._lock:
-            done = self._loaded.get(key)
-            if done is not None:
+            loaded = self._loaded.get(key)
+            if loaded is not None:
                 self._loaded.move_to_end(key)
-                return done
             build_lock = self._build_locks.setdefault(key, threading.Lock())
-        with build_lock:
-            with self._lock:
-                if key in self._loaded:
-                    return self._loaded[key]
-            loaded = self._build(entry)
-            with self._lock:
-                self._loaded[key] = loaded
-                while len(self._loaded) > KEEP_LOADED:
-                    self._loaded.popitem(last=False)
-        loaded.frames.start()
+        if loaded is None:
+            with build_lock:
+                with self._lock:
+                    loaded = self._loaded.get(key)
+                if loaded is None:
+                    loaded = self._build(entry)
+                    with self._lock:
+                        self._loaded[key] = loaded
+                        while len(self._loaded) > KEEP_LOADED:
+                            self._loaded.popitem(last=False)
+        if start_frames:
+            loaded.frames.start()  # nothing where they started already
         return loaded
 
     def loaded_count(self) -> int:

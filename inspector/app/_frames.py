@@ -174,6 +174,12 @@ class FrameStore(Notifying):
         self.decoded = threading.Event()  # every view's frames are in the cache: ready to scrub
         self.done = threading.Event()  # ... and every view's PSNR and frame match are known (or failed)
         self.token = next(_STORE_TOKENS)  # names this store's entries in the cache (playback clips)
+        self._started = False
+
+    @property
+    def started(self) -> bool:
+        """:meth:`start` was called (the views are decoding, or done)."""
+        return self._started
 
     @property
     def cache(self) -> FrameCache:
@@ -188,7 +194,11 @@ class FrameStore(Notifying):
     def start(self) -> None:
         """Fill the cache with every view's frames. A view whose frames are still cached is ready
         at once (a recently seen rollout reopens instantly); its video metrics are computed if
-        not known yet."""
+        not known yet. Later calls do nothing."""
+        with self._lock:
+            if self._started:
+                return
+            self._started = True
         known = self.timeline.known_video_metrics()
         for view in self.views:
             if self._frames_cached(view):

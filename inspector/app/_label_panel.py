@@ -151,7 +151,7 @@ class LabelPanel:
             if k not in labelled and k != self.tab.key:
                 overview = getattr(self.tab, "overview", None)
                 if overview is not None and overview.visible:
-                    overview.hide()
+                    overview.hide(start_frames=False)
                 return self.tab.open(k)
         self.tab.client.add_notification("All labelled", self._queue_text(), auto_close_seconds=3.0)
         return False

@@ -5,7 +5,9 @@ scene (a 350 px side panel does not fit a table); search, sort, filters, "compar
 and the row to open sit in an "Overview" folder at the top of the left panel, since viser's HTML
 cannot call back into Python: a row opens through a real control (``Row to open`` + ``Open
 rollout``). Opening a row, or picking a rollout in the picker, closes the overview and shows that
-rollout in the tab's normal view; the ``Overview`` button brings it back.
+rollout in the tab's normal view; the ``Overview`` button brings it back. The rollout behind the
+overview decodes no video while the rows are computed (that CPU is theirs): its videos start when
+the overview steps aside or the last row is in.
 
 The rows are the app's (:class:`~._overview_rows.OverviewRows`, shared by every tab); a tab keeps
 only its controls' state and redraws when rows arrive (at most every :data:`REDRAW_EVERY_S`).
@@ -125,7 +127,9 @@ class OverviewPanel:
                 self.panel.visible = True
                 self.draw()
 
-    def hide(self) -> None:
+    def hide(self, start_frames: bool = True) -> None:
+        """Hide the overview; ``start_frames``: the rollout it covered is shown, so its videos,
+        held meanwhile, decode now (not where another rollout opens next)."""
         with self._lock:
             self.visible = False
             with self.tab.client.atomic():
@@ -133,13 +137,15 @@ class OverviewPanel:
                 self.tab.right_panel.visible = True
                 self.folder.visible = False
                 self.tab.controls.show_overview.visible = len(self.store) > 0
+        if start_frames:
+            self.tab.start_frames()
 
     def open_selected(self) -> bool:
         """Open the row chosen in ``Row to open`` in the tab's normal view."""
         key = self._option_to_key.get(self.row.value)
         if key is None:
             return False
-        self.hide()
+        self.hide(start_frames=False)  # the row's rollout opens instead of the one behind
         return self.tab.open(key)
 
     # ------------------------------------------------------------------------------------------
@@ -219,6 +225,8 @@ class OverviewPanel:
         if self.tab.closed.is_set():
             self.store.remove_listener(self._rows_arrived)
             return
+        if self.store.done.is_set():
+            self.tab.start_frames()  # every row is in: the rollout behind may decode now
         with self._lock:
             if not self.visible:
                 return

@@ -11,7 +11,9 @@ Only summary rows are kept (a few kB each), never timelines or frames.
 One worker per core for rollouts without video (what ``report`` uses); one worker where rollouts
 have videos, whose decoders hold clips beside the tabs' frame cache (the server stays under 1 GB
 with 60 such rollouts opened). Workers run at a lower CPU priority than the serving threads.
-Stopping the app ends them at once (the tasks under way are dropped), and they end on their own
+The workers may be started before the sessions are read (:func:`start_workers`, from
+``serve``): they import the report's modules on the core the server's own start-up leaves idle,
+rather than after it, beside the server's first tab. Stopping the app ends them at once (the tasks under way are dropped), and they end on their own
 should the app's process end without stopping them. A rollout that fails becomes an error row;
 it never stops the others.
 
@@ -23,14 +25,16 @@ from __future__ import annotations
 
 import os
 import threading
-from concurrent.futures import as_completed
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from ..cache import warn_once
+from ..data.session import GT_DIR, ROLLOUTS_DIR, VIDEO_DIR, is_session
 from ..jobs.pool import default_jobs, init_background_worker, spawn_pool, stop_pool, worker_count
-from ..report.tasks import Outcome, Task, plan_tasks, run_task
+from ..report.tasks import Outcome, Task, plan_tasks, run_task, warm_up
 from ..units import DEFAULT_LIMIT_MARGIN_DEG
 from ._listeners import Listeners, Notifying
 
@@ -78,14 +82,18 @@ class OverviewRows(Notifying):
     Args:
         catalog: the app's :class:`~._catalog.Catalog` (its sessions and metrics cache).
         limit_margin_deg: joint-limit margin [deg], as the app's timelines use.
+        workers: a pool from :func:`start_workers`, now owned by these rows: used where the plan
+            wants as many workers, else stopped and replaced; stopped with the rows.
 
     Attributes:
         done: set once every row is computed (or failed).
         n_cached, n_computed: rows read from the metrics cache / computed here.
     """
 
-    def __init__(self, catalog, limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG) -> None:
+    def __init__(self, catalog, limit_margin_deg: float = DEFAULT_LIMIT_MARGIN_DEG,
+                 workers: ProcessPoolExecutor | None = None) -> None:
         self._margin = limit_margin_deg
+        self._started_workers = workers
         self._measures = catalog.measures
         cache = catalog.metrics_cache
         self._cache_dir = str(cache.root) if cache is not None else None
@@ -116,6 +124,14 @@ class OverviewRows(Notifying):
         self.n_computed = 0
         if not self._sessions:
             self.done.set()
+
+    def drop_started_workers(self) -> None:
+        """Stop the pool from :func:`start_workers` unless rows are computed with it (the app
+        shows no overview)."""
+        with self._lock:
+            pool, self._started_workers = self._started_workers, None
+        if pool is not None:
+            stop_pool(pool, grace_s=0)
 
     # -- reading --------------------------------------------------------------------------------
     def rows(self) -> list[OverviewRow]:
@@ -148,18 +164,31 @@ class OverviewRows(Notifying):
         with self._lock:
             self._stop.set()
             pool = self._pool  # the computing thread forgets it once its workers have ended
-        if pool is not None:
-            stop_pool(pool, grace_s=0)  # no grace: a killed cache write never leaves an entry
+            started, self._started_workers = self._started_workers, None
+        for p in (pool, started):
+            if p is not None:
+                stop_pool(p, grace_s=0)  # no grace: a killed cache write never leaves an entry
 
     def _run(self) -> None:
         _lower_priority()  # this thread only collects rows (and redraws tabs); the workers compute
         try:
             tasks, workers = self._plan()
+            wanted = worker_count(workers, len(tasks))
             with self._lock:
                 if self._stop.is_set():
                     return
-                self._pool = pool = spawn_pool(worker_count(workers, len(tasks)), init_background_worker,
-                                               (BACKGROUND_NICENESS,))
+                started, self._started_workers = self._started_workers, None
+            # as many as the plan wants, all alive (a worker that died while starting broke it)
+            if started is not None and (getattr(started, "_max_workers", None) != wanted
+                                        or getattr(started, "_broken", False)):
+                stop_pool(started, grace_s=0)
+                started = None
+            with self._lock:
+                if self._stop.is_set():
+                    if started is not None:
+                        stop_pool(started, grace_s=0)
+                    return
+                self._pool = pool = started or spawn_pool(wanted, init_background_worker, (BACKGROUND_NICENESS,))
             try:
                 futures = {pool.submit(run_task, task): task for task in tasks}
                 for future in as_completed(futures):
@@ -214,6 +243,24 @@ class OverviewRows(Notifying):
                 else:
                     where = f"{o.error_file}: " if o.error_file else ""
                     self._rows[key] = replace(row, error=f"{where}{o.error or 'failed'}")
+
+
+def start_workers(paths: Sequence[str | Path]) -> ProcessPoolExecutor | None:
+    """The overview's workers, started now and importing the report's modules, where ``paths``
+    are sessions that hold more than one rollout between them (the app opens on the overview)
+    and their first rollout has no video directory (one worker per core, as the rows' plan then
+    wants); else None. Cheap: directory listings only. The caller hands the pool to
+    :class:`OverviewRows`, which stops it when it is not wanted after all."""
+    sessions = [Path(p) for p in paths if is_session(p)]
+    rollouts = [d for s in sessions if (s / ROLLOUTS_DIR).is_dir()
+                for d in sorted((s / ROLLOUTS_DIR).iterdir()) if not d.name.startswith(".")]
+    if len(rollouts) < 2 or (rollouts[0] / VIDEO_DIR).exists() or (rollouts[0] / GT_DIR / VIDEO_DIR).exists():
+        return None
+    jobs = default_jobs()
+    pool = spawn_pool(jobs, init_background_worker, (BACKGROUND_NICENESS,))
+    for _ in range(jobs):  # each submit while no worker is idle starts one more
+        pool.submit(warm_up)
+    return pool
 
 
 def _guarded(task, fn):

@@ -8,7 +8,7 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from pathlib import Path
 
 from ..analysis.measure_settings import DEFAULT_MEASURES, MeasureSettings
@@ -16,11 +16,12 @@ from ..cache import DEFAULT_FRAME_CACHE_MB, MetricsCache
 from ..data.session import is_session
 from ..data.sources import BUNDLED_DEMO, Sources, open_sources
 from ..errors import InspectorError
+from ..jobs.pool import stop_pool
 from ..robot.kinematics import kinematics
 from ._ab_mode import ABTab, served_sessions
 from ._catalog import Catalog
 from ._frames import FrameCache
-from ._overview_rows import OverviewRows
+from ._overview_rows import OverviewRows, start_workers
 from ._robot import SharedRobot, joint_child_links
 from ._state import TabState
 
@@ -43,6 +44,8 @@ class InspectorApp:
             instead of browsing them.
         outcome_source: the outcome source the Overview and the Label panel show
             (``--outcome-source``; None: a label over a file over sim/recording).
+        overview_workers: the Overview's workers, started before the sessions were read
+            (:func:`~._overview_rows.start_workers`); the app owns them from here.
 
     Attributes:
         catalog: the served rollouts and their shared data.
@@ -54,7 +57,8 @@ class InspectorApp:
     def __init__(self, sources: Sources, host: str = "127.0.0.1", port: int = 8080,
                  cache_mb: float = DEFAULT_FRAME_CACHE_MB, metrics_cache: MetricsCache | None = None,
                  ab: bool = False, outcome_source: str | None = None,
-                 measures: MeasureSettings = DEFAULT_MEASURES) -> None:
+                 measures: MeasureSettings = DEFAULT_MEASURES,
+                 overview_workers: ProcessPoolExecutor | None = None) -> None:
         import viser
 
         self.sources = sources
@@ -77,7 +81,7 @@ class InspectorApp:
         # Summary rows of every rollout for the overview, computed once for every tab. Where a tab
         # opens on the overview (more than one rollout), computing starts with the server: the
         # workers start and read their rollouts while the first tab is built, rather than after.
-        self.overview_rows = OverviewRows(self.catalog)
+        self.overview_rows = OverviewRows(self.catalog, workers=overview_workers)
         self.server = viser.ViserServer(host=host, port=port, label="inspector", verbose=False)
         self.server.initial_camera.position = (0.40, -0.32, 0.28)
         self.server.initial_camera.look_at = (0.10, 0.0, 0.10)
@@ -85,6 +89,8 @@ class InspectorApp:
         self.server.on_client_disconnect(self._disconnect)
         if not ab and len(self.overview_rows) > 1:  # once the server is up: nothing below can fail
             self.overview_rows.start()
+        else:
+            self.overview_rows.drop_started_workers()
 
     @property
     def port(self) -> int:
@@ -207,10 +213,18 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
             raise InspectorError(BUNDLED_DEMO, "the bundled demo session is not built yet; build it with "
                                  "`inspector demo --rebuild`, or serve a session: `inspector serve PATH`")
         paths = [BUNDLED_DEMO]
-    # no link leads out of a root; datasets are browsed episode by episode; a path that cannot be
-    # opened is an error card, and the others are served
-    sources = open_sources(paths, dataset=dataset, confine=True, datasets=True, keep_going=True,
-                           calibration=calibration)
+    # The Overview's workers start first: they import the report's modules while this process
+    # reads the sessions, on a core that would otherwise wait.
+    workers = None if ab else start_workers(paths)
+    try:
+        # no link leads out of a root; datasets are browsed episode by episode; a path that cannot
+        # be opened is an error card, and the others are served
+        sources = open_sources(paths, dataset=dataset, confine=True, datasets=True, keep_going=True,
+                               calibration=calibration)
+    except BaseException:
+        if workers is not None:
+            stop_pool(workers, grace_s=0)
+        raise
     if ab and len(served_sessions(sources.sessions)) < 2:
         sources.close()
         raise InspectorError("--ab", f"blind comparison needs two or more sessions with rollouts "
@@ -218,8 +232,10 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
     try:
         app = InspectorApp(sources, host=host, port=port, cache_mb=cache_mb,
                            metrics_cache=MetricsCache(enabled=use_cache), ab=ab, outcome_source=outcome_source,
-                           measures=measures)
+                           measures=measures, overview_workers=workers)
     except BaseException:  # Ctrl-C while starting included: drop temporary sessions
+        if workers is not None:
+            stop_pool(workers, grace_s=0)
         sources.close()
         raise
     if not block:

@@ -153,7 +153,7 @@ class TabState:
             self._set_quietly(self.controls.picker, self.controls.key_to_option[key])
             self.controls.card.content = "<div style='font-size:0.8rem;color:#6b7280'>loading…</div>"
             try:
-                loaded = self.app.catalog.load(key)
+                loaded = self.app.catalog.load(key, start_frames=not self._frames_on_hold())
             except Exception as exc:  # shown, not thrown: the rest of the app keeps working
                 self.error = exc
                 self._show_error(entry.tag, exc)
@@ -172,6 +172,19 @@ class TabState:
                 self._shown_chunk = None
                 self.set_step(0, arms_now=True)
             return True
+
+    def _frames_on_hold(self) -> bool:
+        """The Overview covers this tab's rollout while its rows are computed: the rollout's
+        videos wait (decoding them would take the CPU the rows are computed with) until the
+        Overview steps aside or every row is in (:meth:`start_frames`)."""
+        overview = getattr(self, "overview", None)  # None while the tab is being built
+        return overview is not None and overview.visible and not self.app.overview_rows.done.is_set()
+
+    def start_frames(self) -> None:
+        """Start decoding the shown (and compared) rollout's videos, where they wait."""
+        for loaded in (self.loaded, self.compare):
+            if loaded is not None:
+                loaded.frames.start()
 
     def set_compare(self, key: str | None) -> bool:
         """Compare with rollout ``key`` (None to stop): its arm, path, joints, imagined frames and
