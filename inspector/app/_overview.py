@@ -5,8 +5,8 @@ scene (a 350 px side panel does not fit a table); search, sort, filters, "compar
 and the row to open sit in an "Overview" folder at the top of the left panel, since viser's HTML
 cannot call back into Python: a row opens through a real control (``Row to open`` + ``Open
 rollout``). Opening a row, or picking a rollout in the picker, closes the overview and shows that
-rollout in the tab's normal view; the ``Overview`` button brings it back. The rollout behind the
-overview decodes no video while the rows are computed (that CPU is theirs): its videos start when
+rollout in the tab's normal view; the ``Overview`` button brings it back. The rollout a tab opens
+with, behind the overview, decodes no video while the rows are computed (that CPU is theirs): its videos start when
 the overview steps aside or the last row is in.
 
 The rows are the app's (:class:`~._overview_rows.OverviewRows`, shared by every tab); a tab keeps

@@ -147,13 +147,14 @@ class TabState:
         if entry is None:
             return False
         with self.lock:
+            first = self.key is None
             self.pause()
             self._detach()
             self.key, self.loaded, self.error = key, None, None
             self._set_quietly(self.controls.picker, self.controls.key_to_option[key])
             self.controls.card.content = "<div style='font-size:0.8rem;color:#6b7280'>loading…</div>"
             try:
-                loaded = self.app.catalog.load(key, start_frames=not self._frames_on_hold())
+                loaded = self.app.catalog.load(key, start_frames=not (first and self._frames_on_hold()))
             except Exception as exc:  # shown, not thrown: the rest of the app keeps working
                 self.error = exc
                 self._show_error(entry.tag, exc)
@@ -174,9 +175,10 @@ class TabState:
             return True
 
     def _frames_on_hold(self) -> bool:
-        """The Overview covers this tab's rollout while its rows are computed: the rollout's
-        videos wait (decoding them would take the CPU the rows are computed with) until the
-        Overview steps aside or every row is in (:meth:`start_frames`)."""
+        """The Overview covers the tab's first rollout (the one a tab opens with) while its rows
+        are computed: the rollout's videos wait (decoding them would take the CPU the rows are
+        computed with) until the Overview steps aside or every row is in (:meth:`start_frames`).
+        A rollout opened on purpose decodes at once."""
         overview = getattr(self, "overview", None)  # None while the tab is being built
         return overview is not None and overview.visible and not self.app.overview_rows.done.is_set()
 
