@@ -6,10 +6,10 @@ arm, or, video only, the imagined view beside the simulator's render and no arm.
 from __future__ import annotations
 
 import pytest
-from browser import canvas_is_drawn, frame_sources, skip_reason
+from browser import frame_sources, skip_reason
 from eval_outputs import write_eval
 from offline_runs import write_run
-from test_app_browser import SCENE_BOX, new_page, open_in_page
+from test_app_browser import new_page, open_in_page, wait_for_scene
 
 from inspector.app import serve
 
@@ -39,8 +39,7 @@ def test_a_rollout_of_each_layout_shows_its_video_and_the_arm(browser, app):
         open_in_page(page, tab, app, tag)
         assert set(frame_sources(page)) == frames
         assert all(src.startswith("data:image/") for src in frame_sources(page).values())
-        page.wait_for_timeout(1500)  # let the software renderer draw the arm
-        assert canvas_is_drawn(page.screenshot(), SCENE_BOX), f"{tag}: the 3D canvas is blank"
+        wait_for_scene(page, what=f"{tag}: the 3D canvas to be drawn")
         assert page.get_by_text(words).first.is_visible()
         if tag == "so101_sim_0_ep001":  # its outcome, on the card
             assert page.get_by_text("failure · reward 0 · task so101_sim_0").first.is_visible()
