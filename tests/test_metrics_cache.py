@@ -125,6 +125,56 @@ def test_every_row_written_is_a_rollout_row_and_reads_back_as_written(warm_cache
         assert set(entry["video"]) == {"front", "wrist"}
 
 
+def _tasks(session: Path, cache: Path, jobs: int) -> list:
+    from inspector.data.sources import open_sources
+    from inspector.report.build import DEFAULT_LIMIT_MARGIN_DEG
+    from inspector.report.tasks import plan_tasks
+
+    sources = open_sources([session], lazy=True)
+    try:
+        return plan_tasks(sources.sessions, jobs, DEFAULT_LIMIT_MARGIN_DEG, str(cache))
+    finally:
+        sources.close()
+
+
+def test_a_fully_cached_report_starts_no_workers(session: Path, warm_cache: Path, no_cache_report: str) -> None:
+    """Every row in the cache: the report reads them itself, with no process started for it."""
+    import multiprocessing
+
+    from inspector.report.tasks import run_tasks
+
+    tasks = _tasks(session, warm_cache, jobs=2)
+    assert len(tasks) >= 2  # what would take a pool of two
+    outcomes = []
+    for batch in run_tasks(tasks, 2):
+        assert multiprocessing.active_children() == []
+        outcomes += batch
+    rows = {r["tag"]: r for r in json.loads(no_cache_report)["rollouts"]}
+    assert sorted(o.tag for o in outcomes) == sorted(ROLLOUTS) and all(o.cached for o in outcomes)
+    for o in outcomes:
+        assert o.row == {k: v for k, v in rows[o.tag].items() if k not in ("outcome_sources", "task_outcome")}
+
+
+def test_a_report_looks_up_until_its_first_miss(session: Path, warm_cache: Path, tmp_path: Path) -> None:
+    """What is left after the first rollout missing from the cache goes to the workers, untouched."""
+    from inspector.report.tasks import found_in_cache
+
+    cache = tmp_path / "cache"
+    shutil.copytree(warm_cache, cache)
+    tasks = _tasks(session, cache, jobs=2)
+    tags = [tag for task in tasks for tag in task.tags]
+    found, left = found_in_cache(tasks, 100)
+    assert [o.tag for batch in found for o in batch] == tags and left == []
+    found, left = found_in_cache(tasks, len(tags) - 1)  # no more than it may look up
+    assert [tag for task in left for tag in task.tags] == tags[-len(tasks[-1].tags):]
+    for path in entry_files(cache):
+        if read_back(path)["row"]["tag"] == tags[1]:
+            path.unlink()
+    found, left = found_in_cache(tasks, 100)
+    assert [o.tag for batch in found for o in batch] == tags[:1] and all(o.cached for b in found for o in b)
+    assert [tag for task in left for tag in task.tags] == tags[1:]
+
+
 # ----------------------------------------------------------------------------------------------
 # Properties: any corrupted entry is a miss, or (written with a valid header) one of the right types
 
@@ -337,7 +387,7 @@ def test_export_reads_around_bad_video_metrics(session: Path, warm_cache: Path, 
     shutil.copytree(warm_cache, cache)
     for path in entry_files(cache):
         CORRUPTIONS["video PSNR strings"](path)
-    out = inspector("export", session, "--rollout", "bias_elbow", "-o", tmp_path / "b.rrd", cache=cache)
+    out = inspector("export", session, "--rollout", "single_f000", "-o", tmp_path / "b.rrd", cache=cache)
     assert out.returncode == 0 and out.stderr == "", out.stderr
     assert out.stdout.startswith(f"wrote {tmp_path / 'b.rrd'} (") and out.stdout.count("\n") == 1
 
@@ -411,19 +461,21 @@ def test_export_with_an_unusable_cache_warns_once_and_writes(state: str, session
 @needs_mount
 @pytest.mark.parametrize("output", ["stdout", "--html", "-o"])
 def test_an_output_that_cannot_be_written_is_named(output: str, session: Path, tmp_path: Path):
-    """The output on a full disk: one line naming it, never ``-``, and exit 2."""
+    """The output on a full disk: one line naming it, never ``-``, and exit 2. Of the one-chunk
+    rollout: what is written does not matter, only where."""
     mnt = tmp_path / "mnt"
+    one = session / "rollouts" / "single_f000"
     if output == "stdout":
-        target, out = mnt / "report.json", on_tmpfs(mnt, "full", "report", session, "--json", "--no-cache",
+        target, out = mnt / "report.json", on_tmpfs(mnt, "full", "report", one, "--json", "--no-cache",
                                                     out=str(mnt / "report.json"))
         what = "cannot write the output"
     elif output == "--html":
         target = mnt / "page.html"
-        out = on_tmpfs(mnt, "full", "report", session, "--html", target, "--no-cache")
+        out = on_tmpfs(mnt, "full", "report", one, "--html", target, "--no-cache")
         what = "cannot write the page"
     else:
         target = mnt / "b.rrd"
-        out = on_tmpfs(mnt, "full", "export", session, "--rollout", "bias_elbow", "-o", target, "--no-cache")
+        out = on_tmpfs(mnt, "full", "export", session, "--rollout", "single_f000", "-o", target, "--no-cache")
         what = "cannot write the recording"
     assert out.returncode == 2, out.stderr
     errors = [line for line in out.stderr.splitlines() if line.startswith("error:")]

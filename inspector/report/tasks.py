@@ -40,6 +40,9 @@ from .trajectories import trajectory_summary
 # Rollouts per task at most: a task's rollouts are compared against their GT in one pass, one
 # open decoder each.
 MAX_TASK_ROLLOUTS = 32
+# Rollouts whose rows a report looks up in the metrics cache itself before it starts its workers
+# for the rest anyway: about a second of look-ups, what starting two workers costs.
+LOOK_UP_HERE = 48
 
 
 @dataclass(frozen=True)
@@ -155,12 +158,19 @@ def worker_died(task: Task | EpisodeTask, why: str) -> list[Outcome]:
 
 
 def run_tasks(tasks: Sequence[Task | EpisodeTask], jobs: int) -> Iterator[list[Outcome]]:
-    """Each task's outcomes as it finishes: here when ``jobs`` <= 1, else in worker processes."""
+    """Each task's outcomes as it finishes: here when ``jobs`` <= 1, else in worker processes,
+    started only for what the metrics cache does not hold (see :func:`found_in_cache`)."""
     if jobs <= 1 or len(tasks) <= 1:
         for task in tasks:
             yield run_task(task)
         return
 
+    found, tasks = found_in_cache(tasks, LOOK_UP_HERE)
+    yield from found
+    if len(tasks) <= 1:
+        for task in tasks:
+            yield run_task(task)
+        return
     with local_pool(min(jobs, len(tasks))) as pool:
         futures = {pool.submit(interruptible, run_task, task): task for task in tasks}
         for future in as_completed(futures):
@@ -169,6 +179,42 @@ def run_tasks(tasks: Sequence[Task | EpisodeTask], jobs: int) -> Iterator[list[O
                 yield future.result()
             except BrokenProcessPool as exc:  # a worker died (killed, out of memory, a crash)
                 yield worker_died(task, str(exc))
+
+
+def found_in_cache(tasks: Sequence[Task | EpisodeTask], at_most: int) -> tuple[list[list[Outcome]],
+                                                                             list[Task | EpisodeTask]]:
+    """The leading tasks' rows that the metrics cache holds, looked up in this process up to the
+    first rollout still to compute (``at_most`` rollouts), and the tasks left to run: the first of
+    them cut to the rollouts not looked up yet.
+
+    A fully cached report then starts no worker processes (each one a whole interpreter to start,
+    to read entries that take milliseconds); one with anything to compute starts them after a
+    single look-up that misses.
+    """
+    found: list[list[Outcome]] = []
+    sessions: dict[tuple[str, str | None], Any] = {}
+    looked_up = 0
+    for i, task in enumerate(tasks):
+        if not isinstance(task, Task) or not task.use_cache or looked_up + len(task.tags) > at_most:
+            return found, list(tasks[i:])
+        where = (task.session_root, task.dataset)
+        if where not in sessions:
+            try:
+                sessions[where] = read_session_with_gt(*where)
+            except InspectorError:  # the task's worker says so, for each of its rollouts
+                return found, list(tasks[i:])
+        cache = MetricsCache(task.cache_dir, enabled=True)
+        outcomes: list[Outcome] = []
+        for j, tag in enumerate(task.tags):
+            hit, todo = _look_up(replace(task, tags=(tag,)), sessions[where], cache)
+            if todo:
+                if outcomes:
+                    found.append(outcomes)
+                return found, [replace(task, tags=task.tags[j:]), *tasks[i + 1:]]
+            outcomes += hit
+        looked_up += len(task.tags)
+        found.append(outcomes)
+    return found, []
 
 
 # ----------------------------------------------------------------------------------------------
