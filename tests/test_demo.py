@@ -13,6 +13,7 @@ from inspector.analysis.metrics import prompt_divergence
 from inspector.analysis.timeline import build_timeline
 from inspector.data.session import open_session
 from inspector.demo.generate import DEMO_DIR
+from inspector.report.build import format_report
 from inspector.units import JOINT_NAMES
 
 ELBOW, WRIST_FLEX, GRIPPER = (JOINT_NAMES.index(j) for j in ("elbow_flex", "wrist_flex", "gripper"))
@@ -106,23 +107,28 @@ def test_single_chunk_error_grows_along_the_horizon(demo):
         assert np.all(np.diff(mse) > 0)
 
 
-@pytest.mark.slow
-def test_report_shows_each_fault(demo):
-    out = subprocess.run([sys.executable, "-m", "inspector", "report", str(DEMO_DIR)],
+@pytest.fixture(scope="module")
+def demo_report() -> dict:
+    """``inspector report`` of the demo as JSON, run once for the tests that read it (``--jobs 1``:
+    the pool is not the point here)."""
+    out = subprocess.run([sys.executable, "-m", "inspector", "report", str(DEMO_DIR), "--json", "--jobs", "1"],
                          capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout)
+
+
+@pytest.mark.slow
+def test_report_shows_each_fault(demo, demo_report):
+    text = format_report(demo_report)  # what report prints without --json, from the same report
     for tag in demo:
-        assert tag in out.stdout
-    assert "Prompt divergence" in out.stdout
+        assert tag in text
+    assert "Prompt divergence" in text
 
 
 @pytest.mark.slow
-def test_report_finds_the_video_running_ahead_of_its_actions():
+def test_report_finds_the_video_running_ahead_of_its_actions(demo_report):
     """video_ahead_1s: prompt_train's joints, its imagined video 30 frames (1 s) ahead of them."""
-    out = subprocess.run([sys.executable, "-m", "inspector", "report", str(DEMO_DIR), "--json"],
-                         capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0, out.stderr
-    rows = {r["tag"]: r for r in json.loads(out.stdout)["rollouts"]}
+    rows = {r["tag"]: r for r in demo_report["rollouts"]}
     for view in ("front", "wrist"):
         ahead = rows["video_ahead_1s"]["video_action"][view]
         assert ahead["lag_s_median"] == pytest.approx(1.0, abs=0.1)
@@ -141,11 +147,10 @@ def _osmesa_available() -> str | None:
 
 @pytest.mark.slow
 def test_quick_rebuild(tmp_path):
-    reason = _osmesa_available()
-    if reason is not None:
-        pytest.skip(f"offscreen MuJoCo rendering unavailable: {reason}")
     out = subprocess.run([sys.executable, "-m", "inspector", "demo", "--rebuild", "--quick", "--out", str(tmp_path / "d")],
                          capture_output=True, text=True, timeout=900)
+    if out.returncode != 0 and (reason := _osmesa_available()) is not None:  # (probed only then: a process)
+        pytest.skip(f"offscreen MuJoCo rendering unavailable: {reason}")
     assert out.returncode == 0, out.stderr
     session = open_session(tmp_path / "d")
     assert not session.errors and {"tempo_0.8x", "limits_wrist"} <= set(session.rollouts)

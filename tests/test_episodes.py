@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+from cli_processes import module_command_server
 
 from inspector.data.session import SessionWriter
 from inspector.errors import InspectorError
@@ -51,9 +52,12 @@ def _raw_joints(root: Path, episode: int) -> tuple[np.ndarray, np.ndarray]:
     return out[0], out[1]
 
 
+# the commands run as processes forked from one that imported the CLI once
+_command_server, _run_command = module_command_server()
+
+
 def _cli(*args: str, env: dict | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "inspector", *args], capture_output=True, text=True,
-                          timeout=timeout, env={**os.environ, **(env or {})})
+    return _run_command(*args, timeout=timeout, env={**os.environ, **(env or {})})
 
 
 # ----------------------------------------------------------------------------------------------

@@ -18,6 +18,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
+from cli_processes import module_command_server
 from groot_dreams_layout import SO100_JOINTS, VIDEO_KEY, idm_actions, modality, write_groot_dreams
 
 from inspector.data.importers.calibration import GR00T_SO100_OFFSETS, parse_calibration
@@ -30,9 +31,12 @@ RERUN = Path(sys.executable).parent / "rerun"
 EPISODES = [("pick the grape", 20), ("place the strawberry in the bowl", 24), ("pick the grape", 18)]
 
 
+# the commands run as processes forked from one that imported the CLI once
+_command_server, _run_command = module_command_server()
+
+
 def _cli(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "inspector", *args], capture_output=True, text=True,
-                          timeout=timeout, env={**os.environ})
+    return _run_command(*args, timeout=timeout, env={**os.environ})
 
 
 def _file_actions(root: Path, episode: int) -> np.ndarray:

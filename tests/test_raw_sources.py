@@ -19,11 +19,11 @@ import hashlib
 import json
 import os
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_processes import module_command_server
 from eval_outputs import write_eval
 from groot_dreams_layout import write_groot_dreams
 from offline_runs import write_run
@@ -37,10 +37,14 @@ pytestmark = pytest.mark.slow  # imports and reports through the CLI
 REPO = Path(__file__).resolve().parents[1]
 
 
+# the commands run as processes forked from one that imported the CLI once (some twenty reports and
+# imports: the start-up would be a large part of each)
+_command_server, _run_command = module_command_server()
+
+
 def cli(*argv, cache: Path | None = None) -> subprocess.CompletedProcess:
     env = {**os.environ, **({"INSPECTOR_CACHE_DIR": str(cache)} if cache is not None else {})}
-    return subprocess.run([sys.executable, "-m", "inspector", *map(str, argv)], capture_output=True, text=True,
-                          timeout=300, env=env, cwd=REPO)
+    return _run_command(*argv, timeout=300, env=env, cwd=REPO)
 
 
 def tree(root: Path) -> dict[str, str]:

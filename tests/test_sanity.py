@@ -5,13 +5,14 @@ they were planted, and the real DreamZero-SO101 outputs' figures."""
 from __future__ import annotations
 
 import json
+import os
 import re
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_processes import module_command_server
 from scipy.spatial.distance import pdist, squareform
 
 from inspector.analysis.coherence import coherence_record, coupling_error, gt_motion, phase_offset, phase_offsets
@@ -32,18 +33,17 @@ TESTS = ["action-chunk fidelity", "latent stability", "joint coherence", "multi-
          "autoregressive rollout"]
 
 
+# the commands run as processes forked from one that imported the CLI once
+_command_server, _run_command = module_command_server()
+
+
 def _cli(*args, cache: Path | None = None) -> subprocess.CompletedProcess:
     """``inspector *args`` as a process (reports: ``--jobs 1``, computed in that process: these tests
     are about the measures, not the pool)."""
-    env = None
-    if cache is not None:
-        import os
-
-        env = {**os.environ, "INSPECTOR_CACHE_DIR": str(cache)}
+    env = {**os.environ, **({"INSPECTOR_CACHE_DIR": str(cache)} if cache is not None else {})}
     if args[0] == "report":
         args = (*args, "--jobs", "1")
-    return subprocess.run([sys.executable, "-m", "inspector", *map(str, args)], capture_output=True, text=True,
-                          timeout=900, env=env)
+    return _run_command(*args, timeout=900, env=env)
 
 
 def _in_process(capsys, *args) -> tuple[int, str, str]:
