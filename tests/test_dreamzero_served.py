@@ -32,6 +32,10 @@ CLIENT_VIEW = {"exterior_1": 0, "wrist": 1, "exterior_2": 2}
 
 
 def cli(*argv) -> subprocess.CompletedProcess:
+    """``inspector *argv`` as a process; reports and exports with ``--jobs 1`` (measured in the
+    command's process: these tests are about the served files, not the worker pool)."""
+    if argv[0] in ("report", "export"):
+        argv = (*argv, "--jobs", "1")
     return subprocess.run([sys.executable, "-m", "inspector", *map(str, argv)], capture_output=True,
                           text=True, timeout=300)
 
