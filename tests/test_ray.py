@@ -98,13 +98,13 @@ REPORT_TAGS = ("bias_elbow", "prompt_novel", "prompt_train", "single_f000", "sin
 @pytest.fixture(scope="module")
 def demo_reports(tmp_path_factory) -> dict:
     """``report --json`` of a copy of five demo rollouts (:data:`REPORT_TAGS`), locally
-    (``--jobs 2``) and with ``--ray`` (a local Ray instance of the command's own, started before
-    this module's shared one); the Ray run's metrics cache is kept for
-    :func:`test_ray_workers_honour_the_metrics_cache`."""
+    (``--jobs 1``: in the command's process) and with ``--ray`` (a local Ray instance of the
+    command's own, started before this module's shared one); the Ray run's metrics cache is kept
+    for :func:`test_ray_workers_honour_the_metrics_cache`."""
     tmp = tmp_path_factory.mktemp("demo-reports")
     session = demo_copy(tmp, REPORT_TAGS)
     before = ray_processes()
-    local = inspector("report", session, "--json", "--jobs", "2", cache_dir=tmp / "cache-local")
+    local = inspector("report", session, "--json", "--jobs", "1", cache_dir=tmp / "cache-local")
     assert local.returncode == 0, local.stderr
     on_ray = inspector("report", session, "--json", "--ray", "--jobs", "2", cache_dir=tmp / "cache-ray")
     assert on_ray.returncode == 0, on_ray.stderr
