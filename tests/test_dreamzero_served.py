@@ -10,11 +10,11 @@ from __future__ import annotations
 import datetime
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_processes import module_command_server
 from served_layout import read_stamp, save_client_episode, save_prediction, served_frames
 
 from inspector.data.importers.dreamzero_served import Timing, import_served, parse_grid
@@ -30,10 +30,16 @@ RECORDED_STEPS = 36  # the episode ended during the 4th call's 8 actions (calls 
 SERVED_VIEW = {"exterior_1": 0, "exterior_2": 1, "wrist": 2}
 CLIENT_VIEW = {"exterior_1": 0, "wrist": 1, "exterior_2": 2}
 
+# the commands run as processes forked from one that imported the CLI once
+_command_server, _run_command = module_command_server()
+
 
 def cli(*argv) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "inspector", *map(str, argv)], capture_output=True,
-                          text=True, timeout=300)
+    """``inspector *argv`` as a process (forked from one CLI start-up); reports and exports with ``--jobs 1`` (measured in the
+    command's process: these tests are about the served files, not the worker pool)."""
+    if argv[0] in ("report", "export"):
+        argv = (*argv, "--jobs", "1")
+    return _run_command(*argv, timeout=300)
 
 
 def stamps(path: Path) -> list[tuple[int, int]]:

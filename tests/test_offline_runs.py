@@ -10,12 +10,12 @@ from __future__ import annotations
 import base64
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import simplejpeg
+from cli_processes import module_command_server
 from offline_runs import front_level, write_run
 
 from inspector.analysis.timeline import build_timeline
@@ -27,16 +27,18 @@ from inspector.units import JOINT_LIMITS_RAD, JOINT_NAMES
 
 pytestmark = pytest.mark.slow  # the CLI as processes and a served app
 
+# the commands run as processes forked from one that imported the CLI once
+_command_server, _run_command = module_command_server()
+
 SHUFFLED = ("gripper", "elbow_flex", "shoulder_pan", "wrist_roll", "shoulder_lift", "wrist_flex")
 
 
 def cli(*argv, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    """``inspector *argv`` as a process; reports and exports with ``--jobs 1`` (one worker at most:
+    """``inspector *argv`` as a process (forked from one CLI start-up); reports and exports with ``--jobs 1`` (one worker at most:
     these tests are about the runs' files, not the pool)."""
     if argv[0] in ("report", "export"):
         argv = (*argv, "--jobs", "1")
-    return subprocess.run([sys.executable, "-m", "inspector", *map(str, argv)], capture_output=True,
-                          text=True, timeout=300, cwd=cwd)
+    return _run_command(*argv, timeout=300, cwd=cwd)
 
 
 def expected_radians(values: np.ndarray) -> np.ndarray:
