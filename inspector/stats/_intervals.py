@@ -6,9 +6,9 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from statistics import NormalDist
 
 import numpy as np
-from scipy.special import ndtri
 
 # The bootstrap's defaults: enough resamples that the 2.5% and 97.5% percentiles move by well
 # under a hundredth of the interval's width between seeds; a fixed seed so the same input always
@@ -25,7 +25,14 @@ def z_quantile(confidence: float) -> float:
     """The standard normal quantile of a two-sided ``confidence`` interval (1.96 for 0.95)."""
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must be in (0, 1), got {confidence}")
-    return float(ndtri(0.5 + confidence / 2.0))
+    return normal_quantile(0.5 + confidence / 2.0)
+
+
+def normal_quantile(p: float) -> float:
+    """The standard normal distribution's ``p`` quantile (Wichura's AS241 in the standard
+    library: within 1e-15 of ``scipy.special.ndtri``, without scipy's half-second import in every
+    process that writes a report row)."""
+    return NormalDist().inv_cdf(p)
 
 
 def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> tuple[float, float]:

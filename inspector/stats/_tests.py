@@ -7,9 +7,7 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
-from scipy.special import ndtri
-
-from ._intervals import z_quantile
+from ._intervals import normal_quantile, z_quantile
 
 Verdict = Literal["A better", "B better", "no significant difference"]
 NO_DIFFERENCE: Verdict = "no significant difference"
@@ -74,7 +72,7 @@ def rollouts_needed(rate_a: float, rate_b: float, *, confidence: float = 0.95,
     if rate_a == rate_b:
         return None
     z_alpha = z_quantile(confidence)
-    z_beta = float(ndtri(power))
+    z_beta = normal_quantile(power)
     p = (rate_a + rate_b) / 2.0
     n = ((z_alpha * math.sqrt(2.0 * p * (1.0 - p))
           + z_beta * math.sqrt(rate_a * (1.0 - rate_a) + rate_b * (1.0 - rate_b))) ** 2
