@@ -396,9 +396,11 @@ def test_compare_with_a_session_shows_the_planted_winners_and_drift_figures(brow
 @pytest.mark.browser
 @pytest.mark.slow
 def test_rollouts_are_listed_with_the_broken_one_as_an_error_row(browser, tmp_path_factory):
-    from test_app import BROKEN, make_sessions
+    from test_app import BROKEN, CARRIED_GT, OTHER_SINGLE, SINGLE
 
-    _, broken = make_sessions(tmp_path_factory.mktemp("overview-broken"))
+    # four single-chunk rollouts, one broken, make the point; the whole demo's rows need not be computed
+    broken = _demo_copy(tmp_path_factory.mktemp("overview-broken") / "broken", "broken", broken_tag=BROKEN,
+                        keep=(BROKEN, SINGLE, OTHER_SINGLE, CARRIED_GT))
     app = serve([broken], port=0, block=False)
     try:
         page, tab = _open(browser, app)
