@@ -51,6 +51,7 @@ from inspector.units import DEFAULT_LIMIT_MARGIN_DEG
 DOCS_SCREENSHOT = Path(__file__).resolve().parents[1] / "docs" / "overview.png"
 OFFSET_DEG = 3.0
 OFFSET_TAGS = ("prompt_train", "single_f000")
+PAIR_COPY_TAGS = (*OFFSET_TAGS, "bias_elbow", "single_f153", "prompt_novel")
 ROWS_TIMEOUT_S = 600.0  # computing every demo row (videos included) on a busy 2-core machine
 
 
@@ -120,12 +121,14 @@ def test_rows_are_computed_once_then_listed_from_the_cache(tmp_path, monkeypatch
 def test_rows_without_video_are_reports_rows_computed_by_a_worker_per_core(tmp_path):
     """Rollouts without video (an evaluation's joints against the demo's GT episode) are computed
     as ``report`` computes them, in report's tasks on one worker per core: every row equals
-    ``report --json``'s row of the same rollout."""
+    ``report --json``'s row of the same rollout (``--jobs 1``: report's rows do not depend on its
+    workers, and a pool of its own would only compute the same rows again on the same cores)."""
+    n = 8  # several tasks shared among the workers (two each on two cores)
     base = np.load(BUNDLED_DEMO / "rollouts" / "overrun_60chunks" / "actions.npy")
     rng = np.random.default_rng(3)
     session = tmp_path / "eval"
     with SessionWriter.create(session, name="eval", dataset=str(BUNDLED_DEMO / "dataset")) as w:
-        for i in range(24):
+        for i in range(n):
             w.add_rollout(f"ep000_{i:04d}", kind="autoregressive", episode_index=0, start_frame=0,
                           actions=base + rng.normal(scale=0.3, size=base.shape).cumsum(axis=0),
                           prompt="Pick the red cube" if i % 2 else "Lift the red cube")
@@ -134,12 +137,13 @@ def test_rows_without_video_are_reports_rows_computed_by_a_worker_per_core(tmp_p
     assert workers == default_jobs() and len(tasks) == len(plan_tasks(list(rows._sessions.values()), workers, DEFAULT_LIMIT_MARGIN_DEG))
     rows.start()
     assert rows.done.wait(ROWS_TIMEOUT_S)
-    assert rows.n_computed == 24 and not [r.error for r in rows.rows() if r.error]
-    done = subprocess.run([sys.executable, "-m", "inspector", "report", str(session), "--json", "--no-cache"],
+    assert rows.n_computed == n and not [r.error for r in rows.rows() if r.error]
+    done = subprocess.run([sys.executable, "-m", "inspector", "report", str(session), "--json", "--no-cache",
+                           "--jobs", "1"],
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     reported = {r["tag"]: r for r in json.loads(done.stdout)["rollouts"]}
-    assert len(reported) == 24
+    assert len(reported) == n
     for row in rows.rows():
         summary = json.loads(json.dumps(row.summary))  # as --json writes it
         assert summary == {k: reported[row.tag][k] for k in summary}, row.tag
@@ -282,8 +286,12 @@ def test_figures_and_styles_are_the_reports():
 
 @pytest.fixture(scope="module")
 def demo_pair_app(tmp_path_factory):
-    """The demo and its planted copy, served together, every row computed."""
-    copy = _demo_copy(tmp_path_factory.mktemp("overview") / "checkpoint_b", "checkpoint_b", OFFSET_TAGS)
+    """The demo and a planted copy of five of its rollouts, served together, every row computed.
+
+    The copy holds the two planted ones, one that ties (``bias_elbow``), one more single chunk and
+    the blue-cube prompt: what the tests below look for in it; each of its rows costs a second."""
+    copy = _demo_copy(tmp_path_factory.mktemp("overview") / "checkpoint_b", "checkpoint_b", OFFSET_TAGS,
+                      keep=PAIR_COPY_TAGS)
     app = serve([BUNDLED_DEMO, copy], port=0, block=False)
     # computing starts with the server, before any tab connects
     assert app.overview_rows.done.wait(ROWS_TIMEOUT_S), "the rows did not start with the server"
@@ -335,11 +343,11 @@ def test_overview_lists_sorts_filters_draws_and_opens(browser, demo_pair_app):
     # shown by default (more than one rollout served): every rollout of both sessions
     assert page.locator(".inspector-overview table").first.is_visible()
     assert sorted(_table_keys(page)) == sorted(k for k, e in app.catalog.entries.items() if e.session)
-    assert len(_table_keys(page)) == 34
+    assert len(_table_keys(page)) == 17 + len(PAIR_COPY_TAGS)
 
     select_option(page, "Sort by", "RMSE")
     wait_until(lambda: _numbers(_cells(page, "rmse")) == sorted(_numbers(_cells(page, "rmse")))
-               and len(_numbers(_cells(page, "rmse"))) == 34, what="rows ordered by RMSE")
+               and len(_numbers(_cells(page, "rmse"))) == 17 + len(PAIR_COPY_TAGS), what="rows ordered by RMSE")
     assert _table_keys(page)[-1].endswith("/ tempo_0.8x")  # the demo's largest RMSE: its slow rollout
 
     search = _text_field(page, "Search prompts")
@@ -348,7 +356,7 @@ def test_overview_lists_sorts_filters_draws_and_opens(browser, demo_pair_app):
                "the prompt search")
     search.fill("")
     select_option(page, "Kind", "single-chunk")
-    keys = _wait_keys(page, lambda ks: len(ks) == 12, "the kind filter")
+    keys = _wait_keys(page, lambda ks: len(ks) == 6 + 2, "the kind filter")  # the demo's six, the copy's two
     assert all("/ single_f" in k for k in keys)
 
     # the report's figures, drawn (from the rows the filters keep: the single-chunk samples)
@@ -356,7 +364,7 @@ def test_overview_lists_sorts_filters_draws_and_opens(browser, demo_pair_app):
         drawn = page.locator(f".inspector-overview figure#{figure} svg.chart path.ln, "
                              f".inspector-overview figure#{figure} svg.chart circle.pt")
         assert drawn.count() > 0, f"figure {figure} has nothing drawn"
-    assert page.locator(".inspector-overview circle.pt").count() >= 12  # one dot per sample
+    assert page.locator(".inspector-overview circle.pt").count() >= 6 + 2  # one dot per sample
 
     # a row opens in the tab's normal view
     option = next(o for o in tab.overview.row.options if o.endswith("demo / single_f153"))
@@ -376,14 +384,14 @@ def test_overview_lists_sorts_filters_draws_and_opens(browser, demo_pair_app):
 def test_compare_with_a_session_shows_the_planted_winners_and_drift_figures(browser, demo_pair_app):
     page, tab = _open(browser, demo_pair_app)
     drift = page.locator(".inspector-overview figure#drift svg.chart").first.locator("path.ln:not(.post)")
-    assert drift.count() >= 12  # every autoregressive rollout of both sessions
+    assert drift.count() >= 11 + 3  # every autoregressive rollout of both sessions
     select_option(page, "Compare with session", "checkpoint_b")
     info = page.locator(".inspector-overview .ov-compare").first
     info.wait_for(state="visible")
     text = info.inner_text()
-    assert "17 pair(s) (17 by tag" in text
-    # B predicts 3 deg off on two rollouts: A wins those, the other fifteen tie
-    assert "A better in 2, B better in 0, ties 15" in text
+    assert "5 pair(s) (5 by tag" in text
+    # B predicts 3 deg off on two rollouts: A wins those, the other three tie
+    assert "A better in 2, B better in 0, ties 3" in text
     keys = _wait_keys(page, lambda ks: len(ks) == 17, "B's rows set aside")
     assert all(k.startswith("demo / ") for k in keys)
     for tag in OFFSET_TAGS:
@@ -396,9 +404,11 @@ def test_compare_with_a_session_shows_the_planted_winners_and_drift_figures(brow
 @pytest.mark.browser
 @pytest.mark.slow
 def test_rollouts_are_listed_with_the_broken_one_as_an_error_row(browser, tmp_path_factory):
-    from test_app import BROKEN, make_sessions
+    from test_app import BROKEN, CARRIED_GT, OTHER_SINGLE, SINGLE
 
-    _, broken = make_sessions(tmp_path_factory.mktemp("overview-broken"))
+    # four single-chunk rollouts, one broken, make the point; the whole demo's rows need not be computed
+    broken = _demo_copy(tmp_path_factory.mktemp("overview-broken") / "broken", "broken", broken_tag=BROKEN,
+                        keep=(BROKEN, SINGLE, OTHER_SINGLE, CARRIED_GT))
     app = serve([broken], port=0, block=False)
     try:
         page, tab = _open(browser, app)
