@@ -11,7 +11,6 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from ..analysis.measure_settings import DEFAULT_MEASURES, MeasureSettings
-from ..analysis.timeline import build_timeline
 from ..cache import MetricsCache
 from ..data.episodes import episode_rollout
 from ..data.lerobot_dataset import dataset_name
@@ -20,8 +19,8 @@ from ..errors import InspectorError
 from ..jobs.pool import worker_count
 from ..progress import FractionBar
 from ..units import DEFAULT_LIMIT_MARGIN_DEG
+from .files import RRD_SUFFIX, format_size
 from .jobs import export_in_processes, export_on_ray
-from .recording import RRD_SUFFIX, export_rollout, format_size, write_recording
 
 
 def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
@@ -74,6 +73,8 @@ def export_cli(path: str | Path, output: str | Path, rollout: str | None = None,
                 failed = export_in_processes(targets, worker_count(jobs, len(targets)), views, margin, use_cache,
                                              outcome_source, measures)
                 return 2 if failed else 0
+            from .recording import export_rollout  # written here: imported only now (see .files)
+
             for session, tag, dest in targets:
                 if tag in session.errors:
                     _print_error(session.errors[tag])
@@ -113,6 +114,9 @@ def _export_episodes(ds, episodes: Sequence[int] | None, output: Path, views: Se
         raise InspectorError(output, f"one file for {len(episodes)} episodes; give a directory")
     if not one_file and output.exists() and not output.is_dir():
         raise InspectorError(output, "exists and is not a directory")
+    from ..analysis.timeline import build_timeline
+    from .recording import write_recording  # imported only for what is written here (see .files)
+
     errors = 0
     for index in dict.fromkeys(episodes):
         dest = output if one_file else output / f"{name}_episode_{index}{RRD_SUFFIX}"

@@ -25,7 +25,7 @@ from ..errors import InspectorError
 from ..jobs.pool import init_worker, interruptible, local_pool
 from ..jobs.ray import ray_workers
 from ..progress import progress_bar
-from .recording import export_rollout, format_size
+from .files import format_size
 
 # Recordings a worker process writes, on average, before fresh processes take over: rerun's SDK
 # keeps a few MB of native memory per recording it ever wrote (rerun-io/rerun#12623), so one
@@ -81,6 +81,8 @@ class ExportOutcome:
 def run_export_job(job: ExportJob) -> ExportOutcome:
     """What a worker does: read the rollout, write its recording (video metrics via the cache)."""
     init_worker()
+    from .recording import export_rollout  # here: the driver writes no recording (see .files)
+
     try:
         rollout = load_session_rollout(read_session_with_gt(job.session_root, job.dataset), job.tag)
         dest = export_rollout(rollout, Path(job.dest), job.views, job.limit_margin_deg,

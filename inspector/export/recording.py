@@ -43,12 +43,12 @@ from ..robot.kinematics import kinematics
 from . import layout as L
 from .arms import log_arms, prepare_meshes
 from .description import describe
+from .files import RRD_SUFFIX as RRD_SUFFIX
+from .files import format_size as format_size
 from .outcomes import log_outcomes
 from .sanity_series import log_sanity
 from .series import log_markers, log_metric_series, log_psnr, log_video_action
 from .video import Progress, frame_indexes, log_view
-
-RRD_SUFFIX = ".rrd"
 
 # Share of the progress bar each stage takes (decoding for PSNR dominates a cold export).
 _VIDEO_METRICS = (0.02, 0.70)
@@ -243,11 +243,3 @@ def export_rollout(rollout, dest: Path, views: Sequence[str] | None, limit_margi
     rollout_views = None if views is None else [v for v in views if v in tl.rollout.views or v in tl.gt.views]
     with cached_video_metrics(tl, cache):
         return write_recording(tl, dest, views=rollout_views, progress=progress, outcome_source=outcome_source)
-
-
-def format_size(n_bytes: int) -> str:
-    """``2_900_000`` -> ``"2.9 MB"`` (decimal units)."""
-    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
-        if n_bytes >= scale:
-            return f"{n_bytes / scale:.1f} {unit}"
-    return f"{n_bytes} B"
