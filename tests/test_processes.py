@@ -342,6 +342,36 @@ def test_stop_pool_ends_a_worker_that_a_submit_is_starting():
     assert not left, f"running after stop_pool returned: {left}"
 
 
+def _half_a_result(ready: str) -> None:
+    """A job that sends the header of a 1 MiB result on its worker's result pipe and no bytes
+    after it, then waits: a worker killed half way through sending a large result."""
+    import struct
+
+    frame = sys._getframe()
+    while frame is not None and frame.f_code.co_name != "_process_worker":
+        frame = frame.f_back
+    assert frame is not None, "not in a pool's worker"
+    os.write(frame.f_locals["result_queue"]._writer.fileno(), struct.pack("!i", 1 << 20))
+    Path(ready).touch()
+    time.sleep(600)
+
+
+def test_stop_pool_ends_the_pools_thread_that_a_half_sent_result_left_reading(tmp_path):
+    """A worker killed between a large result's header and its bytes left the pool's own thread
+    reading forever (this process holds that pipe's write end too), and a command joining it at
+    exit never ended: stop_pool ends that thread."""
+    ready = tmp_path / "header-sent"
+    pool = spawn_pool(1)
+    future = pool.submit(_half_a_result, str(ready))
+    wait_until(ready.exists, START_TIMEOUT_S, "the worker to send half a result")
+    manager = pool._executor_manager_thread
+    assert manager is not None and manager.is_alive()
+    stop_pool(pool, grace_s=0)
+    manager.join(60)  # (stop_pool waits for it itself: this only keeps a failure from hanging)
+    assert not manager.is_alive(), "the pool's thread still waits for the rest of the result"
+    assert future.done() and future.exception() is not None
+
+
 def test_the_overviews_workers_load_what_reports_do_at_a_lower_priority():
     """A worker of the app's overview imports no part of the app (a spawned worker imports its
     initializer's module: it once imported viser and every app module), has numpy's BLAS on one

@@ -36,6 +36,9 @@ STOP_GRACE_S = 5.0
 KILL_WAIT_S = 10.0
 # How often a worker whose pipes have closed is checked until it has exited [s].
 EXIT_POLL_S = 0.005
+# How long stop_pool waits for the pool's own thread to end once the workers have [s] (it ends
+# within milliseconds; a busy machine may take longer, and stop_pool returns anyway).
+MANAGER_END_S = 5.0
 # How often a worker checks that its parent is alive when the parent's pipe cannot tell (the
 # parent was replaced: another process inherited that pipe, or a subreaper adopted this one) [s].
 PARENT_CHECK_S = 1.0
@@ -66,6 +69,9 @@ def stop_pool(pool: ProcessPoolExecutor, grace_s: float = STOP_GRACE_S) -> None:
     # pool fills as it starts workers). shutdown() waits for a submit that is starting a worker
     # (both hold the pool's lock), and no worker starts after it: the mapping is then complete.
     started = getattr(pool, "_processes", None)
+    # (and its thread, with its result pipe's write end: see _unblock_manager)
+    manager = getattr(pool, "_executor_manager_thread", None)
+    results = getattr(getattr(pool, "_result_queue", None), "_writer", None)
     pool.shutdown(wait=False, cancel_futures=True)
     processes = list(dict(started or {}).values())  # a copy: the pool's manager thread changes it
     if grace_s > 0:
@@ -78,6 +84,24 @@ def stop_pool(pool: ProcessPoolExecutor, grace_s: float = STOP_GRACE_S) -> None:
         with suppress(ProcessLookupError, ValueError, AttributeError):
             process.kill()
     _wait_until_ended(running, KILL_WAIT_S)
+    _unblock_manager(manager, results)
+
+
+def _unblock_manager(manager: threading.Thread | None, results: Any) -> None:
+    """Let the pool's own thread end, even where a killed worker left it reading half a result.
+
+    That thread reads each result whole (a blocking ``recv``): a worker killed between a large
+    result's header and its bytes left it waiting for bytes no one would send, since this
+    process holds the pipe's write end too, and so forever; at exit the interpreter joins it,
+    and the command never ended. Only workers write there, and they have all ended: closing this
+    process's write end leaves what they sent readable, then gives the thread the end of the
+    pipe (a broken pool, and it ends).
+    """
+    if results is not None:
+        with suppress(OSError):
+            results.close()
+    if manager is not None:
+        manager.join(MANAGER_END_S)
 
 
 def _wait_until_ended(processes: list, timeout: float) -> list:
