@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 from cli_processes import CommandServer
+from demo_copies import demo_copy
 
 pytestmark = pytest.mark.slow  # the CLI as processes
 
@@ -93,12 +94,7 @@ FEW_ROLLOUTS = ("single_f000", "single_f076", "single_f153")
 @pytest.fixture(scope="module")
 def few_rollouts(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The bundled demo with only ``FEW_ROLLOUTS`` (read-only for tests)."""
-    import shutil
-
-    dest = tmp_path_factory.mktemp("few") / "demo"
-    shutil.copytree(DEMO, dest, ignore=lambda d, names: [n for n in names if Path(d).name == "rollouts"
-                                                         and n not in FEW_ROLLOUTS])
-    return dest
+    return demo_copy(tmp_path_factory.mktemp("few"), FEW_ROLLOUTS)
 
 
 @pytest.mark.parametrize("command", [("report", "{session}", "--json"), ("export", "{session}", "-o", "{out}")])

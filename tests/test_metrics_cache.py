@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from demo_copies import demo_copy
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
@@ -48,9 +49,7 @@ SMALL = ("single_f000", "single_f076")
 
 @pytest.fixture(scope="module")
 def session(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    root = tmp_path_factory.mktemp("cache") / "demo"
-    shutil.copytree(DEMO, root, ignore=lambda d, names: [n for n in names if Path(d).name == "rollouts"
-                                                         and n not in ROLLOUTS])
+    root = demo_copy(tmp_path_factory.mktemp("cache"), ROLLOUTS)
     for tag in ("bias_elbow", "tempo_0.8x"):
         _keep_chunks(root / "rollouts" / tag, CHUNKS)
     return root
@@ -91,10 +90,7 @@ def no_cache_report(session: Path) -> str:
 
 @pytest.fixture(scope="module")
 def small_session(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    root = tmp_path_factory.mktemp("small") / "demo"
-    shutil.copytree(DEMO, root, ignore=lambda d, names: [n for n in names if Path(d).name == "rollouts"
-                                                         and n not in SMALL])
-    return root
+    return demo_copy(tmp_path_factory.mktemp("small"), SMALL)
 
 
 @pytest.fixture(scope="module")

@@ -22,6 +22,7 @@ import uuid
 from pathlib import Path
 
 import pytest
+from demo_copies import demo_copy
 
 from inspector.errors import InspectorError
 from inspector.report.build import build_report
@@ -65,14 +66,6 @@ def inspector(*args: str, cache_dir: Path, timeout: float = 600, env: dict[str, 
     env = {**os.environ, **(env or {}), "INSPECTOR_CACHE_DIR": str(cache_dir), "RAY_USAGE_STATS_ENABLED": "0"}
     return subprocess.run([sys.executable, "-m", "inspector", *map(str, args)], capture_output=True, text=True,
                           env=env, timeout=timeout)
-
-
-def demo_copy(where: Path, tags: tuple[str, ...]) -> Path:
-    """A copy of the demo with only the rollouts ``tags`` (its dataset and session file whole)."""
-    session = where / "demo"
-    shutil.copytree(DEMO, session, ignore=lambda d, names: [n for n in names if Path(d).name == "rollouts"
-                                                            and n not in tags])
-    return session
 
 
 @pytest.fixture()

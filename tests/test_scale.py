@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from demo_copies import demo_copy
 
 from inspector.app._frames import FrameCache
 from inspector.data.session import SessionWriter
@@ -235,16 +236,6 @@ def test_frames_past_8k_are_refused_in_one_line(tmp_path):
 # report: the same numbers however it runs
 
 
-def _demo_copy(where: Path, tags: tuple[str, ...]) -> Path:
-    """A copy of the demo with only the rollouts ``tags`` (its dataset and session file whole)."""
-    import shutil
-
-    session = where / "demo"
-    shutil.copytree(DEMO, session, ignore=lambda d, names: [n for n in names if Path(d).name == "rollouts"
-                                                            and n not in tags])
-    return session
-
-
 def _close(a, b, path: str, rel: float) -> None:
     if isinstance(a, dict):
         assert set(a) <= set(b) | {"worst_chunk", "start_frame", "n_chunks"}, path
@@ -316,7 +307,7 @@ def test_a_rollouts_numbers_do_not_depend_on_its_batch():
 
 
 def test_metrics_cache_hits_and_invalidates(tmp_path):
-    session = _demo_copy(tmp_path, ("bias_elbow", "tempo_0.8x"))
+    session = demo_copy(tmp_path, ("bias_elbow", "tempo_0.8x"))
     task = Task(str(session), ("bias_elbow", "tempo_0.8x"), None, 2.0, str(tmp_path / "cache"))
     first = run_task(task)
     assert [o.cached for o in first] == [False, False]
@@ -335,7 +326,7 @@ def test_metrics_cache_hits_and_invalidates(tmp_path):
 
 def test_a_broken_rollout_in_a_batch_fails_alone(tmp_path):
     # all four share GT episode 0 from frame 0, hence one batch
-    session = _demo_copy(tmp_path, ("bias_elbow", "tempo_0.8x", "limits_wrist", "prompt_train"))
+    session = demo_copy(tmp_path, ("bias_elbow", "tempo_0.8x", "limits_wrist", "prompt_train"))
     video = session / "rollouts" / "bias_elbow" / "video" / "wrist.mp4"
     video.write_bytes(video.read_bytes()[:5000])  # truncated: undecodable after a few frames
     report = build_report([str(session)], jobs=1, use_cache=False)
