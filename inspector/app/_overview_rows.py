@@ -178,9 +178,9 @@ class OverviewRows(Notifying):
                 if self._stop.is_set():
                     return
                 started, self._started_workers = self._started_workers, None
-            # as many as the plan wants, all alive (a worker that died while starting broke it)
-            if started is not None and (getattr(started, "_max_workers", None) != wanted
-                                        or getattr(started, "_broken", False)):
+            # as many as the plan wants (start_workers starts one per core), all alive (a worker
+            # that died while starting broke it)
+            if started is not None and (wanted != default_jobs() or getattr(started, "_broken", False)):
                 stop_pool(started, grace_s=0)
                 started = None
             with self._lock:
