@@ -433,6 +433,40 @@ def test_stopping_the_overview_as_it_lets_its_worker_go_waits_for_that_worker(mo
     assert not left, f"running after stop() returned: {left}"
 
 
+def test_stopping_the_overview_as_it_hands_its_tasks_over_ends_it_quietly(monkeypatch):
+    """OverviewRows.stop() between the computing thread making its pool and handing it the tasks:
+    the thread ends as stopped (it raised "cannot schedule new futures after shutdown")."""
+    import inspector.app._overview_rows as overview_rows
+    from inspector.app._catalog import Catalog
+    from inspector.cache import MetricsCache
+    from inspector.data.sources import open_sources
+
+    stopped, raised = threading.Event(), []
+
+    def spawn(*args, **kwargs):
+        pool = spawn_pool(*args, **kwargs)
+        submit = pool.submit
+
+        def submit_once_stopped(*a, **kw):
+            if not stopped.is_set():  # stop() from another thread, as the server's shutdown does
+                threading.Thread(target=lambda: (rows.stop(), stopped.set())).start()
+                assert stopped.wait(START_TIMEOUT_S)
+            return submit(*a, **kw)
+
+        pool.submit = submit_once_stopped
+        return pool
+
+    monkeypatch.setattr(overview_rows, "spawn_pool", spawn)
+    monkeypatch.setattr(threading, "excepthook", lambda args: raised.append(args.exc_value))
+    catalog = Catalog(open_sources([BUNDLED_DEMO], confine=True, datasets=True), None, {},
+                      metrics_cache=MetricsCache(enabled=False))
+    rows = overview_rows.OverviewRows(catalog)
+    rows.start()
+    assert rows.done.wait(START_TIMEOUT_S), "the computing thread never ended"
+    assert stopped.is_set(), "the pool was never handed a task: nothing was tested"
+    assert raised == []
+
+
 # ----------------------------------------------------------------------------------------------
 # report and export, their workers computing
 

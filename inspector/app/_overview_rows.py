@@ -190,7 +190,12 @@ class OverviewRows(Notifying):
                     return
                 self._pool = pool = started or spawn_pool(wanted, init_background_worker, (BACKGROUND_NICENESS,))
             try:
-                futures = {pool.submit(run_task, task): task for task in tasks}
+                try:
+                    futures = {pool.submit(run_task, task): task for task in tasks}
+                except RuntimeError:  # stop() shut the pool down as the tasks were handed over
+                    if self._stop.is_set():
+                        return
+                    raise
                 for future in as_completed(futures):
                     outcomes = _guarded(futures[future], lambda _: future.result())
                     if self._stop.is_set():  # stopped meanwhile: its workers were killed
