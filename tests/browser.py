@@ -150,15 +150,17 @@ ARM_AND_VIDEO_STEP = """() => {
 FRAME_TIMES = """() => { window.__frames = []; let p = performance.now();
     const f = (n) => { window.__frames.push(n - p); p = n; requestAnimationFrame(f); }; requestAnimationFrame(f); }"""
 # ms from the user's press (the event's own time stamp, taken as the input arrived) to the first
-# animation frame showing images again whose step the readout says too
-PAUSE_ANSWER = """() => { window.__answer = null; window.__pressed = null;
-    document.addEventListener('pointerdown', (e) => { window.__pressed = e.timeStamp; window.__answer = null; }, true);
+# animation frame showing images again whose step the readout says too, and how many animation
+# frames began in between (the first being the one the press waited for)
+PAUSE_ANSWER = """() => { window.__answer = null; window.__pressed = null; let frames = 0;
+    document.addEventListener('pointerdown', (e) => { window.__pressed = e.timeStamp; window.__answer = null; frames = 0; }, true);
     const tick = () => {
       if (window.__pressed !== null && window.__answer === null) {
+        frames += 1;
         const r = document.querySelector('.inspector-readout'), g = document.querySelector('.inspector-video');
         const m = r && r.textContent.match(/step (\\d+)/);
         if (g && !g.querySelector('video') && m && +m[1] === +g.dataset.step)
-          window.__answer = {ms: performance.now() - window.__pressed, step: +m[1]};
+          window.__answer = {ms: performance.now() - window.__pressed, step: +m[1], frames: frames};
       }
       requestAnimationFrame(tick); }; tick(); }"""
 
@@ -172,7 +174,8 @@ def play_on_one_clock(page, tab, presses: int = 1) -> dict:
     Returns ``{"gaps": |readout step - clip step| per look with the clip playing, "frame_s": the
     time between the page's animation frames during playback, as a look at a random moment finds
     it (:func:`time_weighted_median`) [s], "pauses": [{"s": press
-    to answered [s], "step": where it stopped, "clip_step": the clip's step at the press}]}``.
+    to answered [s], "frames": the animation frames that began meanwhile, the one that showed the
+    answer included, "step": where it stopped, "clip_step": the clip's step at the press}]}``.
     """
     fps = tab.loaded.timeline.fps
     page.get_by_role("button", name="Play").click()
@@ -198,7 +201,8 @@ def play_on_one_clock(page, tab, presses: int = 1) -> dict:
         answer = wait_until(lambda: page.evaluate("() => window.__answer"), timeout=60, interval=0.05,
                             what="Pause to bring back the images and the readout of one step")
         wait_until(lambda: not tab.playing, what="the tab to pause")
-        pauses.append({"s": answer["ms"] / 1e3, "step": answer["step"], "clip_step": clip_step, "tab_step": tab.step})
+        pauses.append({"s": answer["ms"] / 1e3, "frames": answer["frames"], "step": answer["step"],
+                       "clip_step": clip_step, "tab_step": tab.step})
     return {"gaps": gaps, "frame_s": frame_s, "pauses": pauses}
 
 

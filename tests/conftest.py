@@ -42,9 +42,17 @@ def real_outputs_skip_reason() -> str | None:
 
 @pytest.fixture(autouse=True, scope="session")
 def _private_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> None:
-    """The metrics and mesh caches of this test run, apart from the user's (and inherited by
-    every CLI the tests start)."""
-    os.environ["INSPECTOR_CACHE_DIR"] = str(tmp_path_factory.mktemp("inspector-cache"))
+    """The metrics and mesh caches of this test run, apart from the user's, inherited by every
+    CLI the tests start. One for the run's workers together (in the run's own temporary folder,
+    above each worker's): a rollout that several modules report, the demo's above all, is computed
+    once a run, as a user's second report reads the first one's rows (entries are written whole,
+    by rename, so workers may share them). Tests of the cache itself use caches of their own."""
+    run_dir = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        run_dir = run_dir.parent  # (each worker's folder is under the run's)
+    cache = run_dir / "inspector-cache"
+    cache.mkdir(exist_ok=True)
+    os.environ["INSPECTOR_CACHE_DIR"] = str(cache)
 
 
 # How long the processes the tests started get to end after the last test [s] (generous: a busy

@@ -40,6 +40,10 @@ pytestmark = [pytest.mark.browser, pytest.mark.slow] + ([pytest.mark.skip(reason
 DOCS_SCREENSHOT = Path(__file__).resolve().parents[1] / "docs" / "screenshot.png"
 DOCS_IMPORTED = DOCS_SCREENSHOT.with_name("imported.png")
 SCENE_BOX = (420, 120, 960, 900)  # part of a 1600x1000 page where the 3D canvas shows
+# The demo rollout the clock test plays to its end: 25 chunks, a 7.5 s clip at 1x (the page draws
+# in software at full CPU for as long as it plays).
+PLAYED_TO_THE_END = "phase_lag_wrist"
+PAUSE_FRAMES = 4  # animation frames a page may take to answer Pause (see the clock test)
 
 
 @pytest.fixture(scope="module")
@@ -516,8 +520,8 @@ def test_arms_readout_and_video_play_on_one_clock(browser, demo_app):
     stands while the video moves on: the bounds take the larger of the spec and what the page's
     own frames allow (a frame as a look at a random moment finds it; for the gap one frame's
     steps: the readout stands for up to a frame, and the lead is measured over frames whose
-    length changes; two frames for Pause). The server's own clock, the clock before, ran 20-160 steps ahead
-    for the whole playback."""
+    length changes; for Pause, the frames an answer takes at the least). The server's own clock,
+    the clock before, ran 20-160 steps ahead for the whole playback."""
     import statistics
 
     # The demo served for the run: its catalog and Overview rows are made by now (a fresh server
@@ -525,7 +529,7 @@ def test_arms_readout_and_video_play_on_one_clock(browser, demo_app):
     # that drive a browser run one after another).
     demo = demo_app
     page, tab = new_page(browser, demo)
-    open_in_page(page, tab, demo, "prompt_train")
+    open_in_page(page, tab, demo, PLAYED_TO_THE_END)
     fps = tab.loaded.timeline.fps
     wait_until(lambda: tab.controls.light_3d.value is True, what="the page to tick Light 3D")
     tab.play()  # encode the clips once: the measured Play finds them cached
@@ -541,8 +545,13 @@ def test_arms_readout_and_video_play_on_one_clock(browser, demo_app):
     assert statistics.median(gaps) <= gap_bound, (
         f"median gap {statistics.median(gaps):.1f} steps (bound {gap_bound:.1f}; a 3D frame every "
         f"{frame_s * 1e3:.0f} ms); gaps: {[round(g) for g in gaps]}")
-    pause_bound = max(1.0, 2 * frame_s)
-    assert pause["s"] <= pause_bound, f"Pause answered after {pause['s']:.2f} s (bound {pause_bound:.2f} s)"
+    # Pause within 1 s, or, on a page whose frames are too slow for that, within the frames an
+    # answer takes at the least: the frame the press waits for, the one the server's answer
+    # arrives in and the one that shows it, and one for the server on a loaded machine (a
+    # software-WebGL frame takes 0.3-0.7 s under load: 3-4 frames, 0.8-1.9 s, in 20 presses)
+    assert pause["s"] <= 1.0 or pause["frames"] <= PAUSE_FRAMES, (
+        f"Pause answered after {pause['s']:.2f} s and {pause['frames']} animation frames "
+        f"(bound 1 s, or {PAUSE_FRAMES} frames)")
     assert pause["tab_step"] == pause["step"]  # the arms are where the images are
     # it stopped where the clip was, give or take what the clip played while the press travelled
     # (a page too busy to pass the press on is as late with its last report of the clip)

@@ -255,13 +255,10 @@ def test_sanity_config_overrides_a_threshold_and_bad_ones_are_one_line(tmp_path,
 
 
 @pytest.fixture(scope="module")
-def demo_cache(tmp_path_factory) -> Path:
-    return tmp_path_factory.mktemp("cache")
-
-
-@pytest.fixture(scope="module")
-def demo_report(demo_cache) -> dict:
-    out = _cli("report", DEMO, "--json", "--sanity", cache=demo_cache)
+def demo_report() -> dict:
+    """The demo's report, through the run's metrics cache (the rows other modules' reports of the
+    demo computed are read back)."""
+    out = _cli("report", DEMO, "--json", "--sanity")
     assert out.returncode == 0, out.stderr
     return json.loads(out.stdout)
 
@@ -287,10 +284,10 @@ def test_demo_seam_jump_is_flagged_at_its_chunk_only(demo_report):
             assert row["seams"] is None and row["completion"] is None and row["video_break"] == {}
 
 
-def test_looser_tolerances_complete_sooner_and_flag_fewer_seams_never_read_from_the_cache(demo_report, demo_cache):
-    # the same metrics cache as the defaults' report: a row of other tolerances is not read back
+def test_looser_tolerances_complete_sooner_and_flag_fewer_seams_never_read_from_the_cache(demo_report):
+    # the same metrics cache as the defaults' report (the run's): their rows are not read back
     out = _cli("report", DEMO / "rollouts" / "early_wander", DEMO / "rollouts" / "seam_jump", "--json",
-               "--completion-tol-deg", "20", "--completion-hold-s", "0.2", "--seam-floor", "30", cache=demo_cache)
+               "--completion-tol-deg", "20", "--completion-hold-s", "0.2", "--seam-floor", "30")
     assert out.returncode == 0, out.stderr
     loose, default = _rows(json.loads(out.stdout)), _rows(demo_report)
     c, c0 = loose["early_wander"]["completion"], default["early_wander"]["completion"]
