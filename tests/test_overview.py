@@ -416,8 +416,9 @@ def test_rollouts_are_listed_with_the_broken_one_as_an_error_row(browser, tmp_pa
         assert sorted(keys) == sorted(app.catalog.keys())
         error_row = page.locator("tr.error", has_text=BROKEN)
         assert error_row.count() == 1 and "actions.npy" in error_row.inner_text()
+        # the single-chunk samples and their mean (the figure is drawn after the rows it shows)
         per_step = page.locator(".inspector-overview figure#per-step-rmse svg.chart path.ln")
-        assert per_step.count() >= 2  # the single-chunk samples and their mean
+        wait_until(lambda: per_step.count() >= 2, what="the per-step RMSE figure's lines")
         select_option(page, "Sort by", "RMSE")
         wait_until(lambda: _numbers(_cells(page, "rmse")) == sorted(_numbers(_cells(page, "rmse"))),
                    what="rows ordered by RMSE")
