@@ -28,14 +28,29 @@ import pytest
 # child's exit status. Children are reaped before the next request (one command at a time per
 # server; a test that wants several at once starts several servers).
 _SERVER = r"""
-import json, os, sys, tempfile, traceback
+import importlib, json, os, sys, tempfile, traceback
 import numpy  # noqa: F401  (what every command loads: paid once here)
 from inspector.cli import build_parser, main
 build_parser()  # (and the modules it reads defaults from)
 
+# What a command that computes rows imports (a second of CPU): imported here before the first
+# such command forks, and never for a module whose commands only refuse. Imports only: no thread
+# or pool is started before a fork.
+COMPUTING = {"report", "compare", "export", "import", "info"}
+ROW_MODULES = ("av", "pyarrow.parquet", "pyarrow.dataset", "pyarrow.compute",
+               "inspector.report.build", "inspector.report.tasks", "inspector.analysis.sweep",
+               "inspector.analysis.video_metrics", "inspector.analysis.video_break",
+               "inspector.robot.kinematics", "inspector.data.sources", "concurrent.futures.process")
+preloaded = False
+
 def serve():
+    global preloaded
     for line in sys.stdin:
         req = json.loads(line)
+        if not preloaded and req["argv"][:1] and req["argv"][0] in COMPUTING:
+            for name in ROW_MODULES:
+                importlib.import_module(name)
+            preloaded = True
         pid = os.fork()
         if pid == 0:
             return req

@@ -147,6 +147,53 @@ def test_reverse_order_is_penalised_by_dtw_not_best_match():
     assert reverse_drift.mean() > 10.0
 
 
+@pytest.mark.parametrize("seed", range(40))
+def test_nearest_poses_is_the_exhaustive_search(seed):
+    """Distances exactly as ``sqrt(sum((p - g)^2))`` gives them for the nearest GT pose, as a
+    KD-tree answers them; the index: the nearest pose, and among poses tied at that distance
+    (held and revisited poses, whole-degree values) the one nearest in time to ``near``. Small
+    blocks, so that a search runs over several."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(seed)
+    g = rng.normal(scale=rng.choice([1.0, 50.0, 1e6]), size=(int(rng.integers(1, 300)), 6))
+    if seed % 3 == 0:  # holds: every pose ten times, and the first ones again at the end
+        g = np.concatenate([np.repeat(g[:max(1, len(g) // 10)], 10, axis=0), g[:3]])
+    if seed % 4 == 0:
+        g = np.round(g)
+    n = int(rng.integers(1, 400))
+    p = np.concatenate([g[rng.integers(0, len(g), n // 2)], rng.normal(scale=50, size=(n - n // 2, 6))])
+    if seed % 5 == 0:
+        p = np.round(p)
+    near = rng.integers(0, len(g), len(p))
+    old_block, metrics.NEAREST_BLOCK = metrics.NEAREST_BLOCK, 64 * len(g)
+    try:
+        dist, index = metrics.nearest_poses(p, g, near)
+    finally:
+        metrics.NEAREST_BLOCK = old_block
+    squared = np.square(p[:, None, :] - g[None, :, :]).sum(axis=-1)  # (N, G), exactly as the function sums
+    assert np.array_equal(dist, np.sqrt(squared.min(axis=1)))
+    assert np.array_equal(dist, cKDTree(g).query(p, k=1)[0])
+    for row, (i, tied) in enumerate(zip(index, squared == squared.min(axis=1, keepdims=True))):
+        candidates = np.flatnonzero(tied)
+        assert i == candidates[np.argmin(np.abs(candidates - near[row]))]
+
+
+def test_a_pose_the_episode_holds_at_its_start_and_end_matches_the_one_nearest_in_time():
+    """The rest pose at the start and at the end of an episode: the rollout's first steps at rest
+    match the start's hold, its last steps the end's (each by its middle)."""
+    rest, path = np.array([0.0, -90, 90, 60, 0, 5]), _smooth_path(200)
+    gt = np.concatenate([np.repeat(rest[None], 20, axis=0), path, np.repeat(rest[None], 20, axis=0)])
+    pred = gt + 0.5  # the same course, a little off: the two holds are equally near
+    drift, index = metrics.best_match(pred, gt)
+    assert np.all(drift <= np.sqrt(6 * 0.25) + 1e-12)  # (on the path, a neighbouring frame may be nearer)
+    assert list(index[:20]) == [9] * 20 and list(index[-20:]) == [229] * 20
+    assert metrics.tempo(index) == pytest.approx(1.0, abs=0.05)  # (the holds count by their middles)
+    # a rollout that starts 100 frames into the episode: "in time" counts from there
+    _, late = metrics.best_match(pred[-20:], gt, offset=len(gt) - 20)
+    assert list(late) == [229] * 20
+
+
 def _reference_dtw(pred, gt):
     """Textbook open-end DTW with a Python double loop: total cost, path length, per-sample mean
     cost. The path starts at both starts and ends at the cheapest cell of the last row."""

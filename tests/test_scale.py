@@ -274,8 +274,12 @@ def test_report_gives_the_numbers_it_gave_before_streaming(demo_reports):
     for row in (r for r in now["rollouts"] if r["tag"] in old_rows and not r["tag"].startswith("single_f")):
         old = old_rows[row["tag"]]
         for key in ("rmse_deg", "per_joint_rmse", "per_step_mse", "time_aligned_drift", "best_match_drift",
-                    "tempo", "video_psnr_db", "post_episode_chunks"):
+                    "video_psnr_db", "post_episode_chunks"):
             _close(row[key], old[key], f"{row['tag']}.{key}", rel=1e-12)
+        # A step at a pose the episode holds at two times (the rest pose at its start and end) now
+        # matches the hold nearest in time; a KD-tree matched whichever it found first. The tempo
+        # fit moved by 0.002 at most (test_metrics checks the rule).
+        _close(row["tempo"], old["tempo"], f"{row['tag']}.tempo", rel=0.0025)
         # FK is now exact to 1e-15 m (it was 5e-7 m off through a float32 URDF parse). DTW is left
         # out: its alignment is open at the end since (a rollout is not charged for the part of
         # the episode it never reaches), and test_metrics checks it against the textbook's.

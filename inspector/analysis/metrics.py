@@ -87,38 +87,79 @@ def time_aligned(pred: npt.ArrayLike, gt: npt.ArrayLike, offset: int = 0
     return joint_distance(pred, gt_aligned), gt_aligned, t >= gt.shape[0]
 
 
-# Threads a nearest-pose query may use (-1: one per core); a pool's worker process sets 1, as for
-# DTW: its own threads only crowd the other workers (and a Ctrl-C in the middle of a query once
-# left one of them printing a std::bad_alloc traceback).
-KDTREE_WORKERS = -1
+# Distances a nearest-pose search holds at once (8 MiB of float64): a 60-chunk rollout against a
+# long episode is searched in a few blocks, and a sweep of 1,000 rollouts never builds the whole
+# (B, T, G) table.
+NEAREST_BLOCK = 1 << 20
 
 
-def best_match(pred: npt.ArrayLike, gt: npt.ArrayLike) -> tuple[Array, npt.NDArray[np.int64]]:
+def best_match(pred: npt.ArrayLike, gt: npt.ArrayLike, offset: int = 0) -> tuple[Array, npt.NDArray[np.int64]]:
     """Distance to the nearest GT pose anywhere in the episode (speed-invariant).
-
-    A KD-tree over the episode's poses answers each predicted sample exactly in O(log G), so a
-    sweep of 1,000 rollouts never builds the (B, T, G) distance table.
 
     Args:
         pred: (..., T, 6).
         gt: (G, 6).
+        offset: GT index of rollout step 0. Where GT frames at different times tie (the rest
+            pose at the episode's start and at its end), step t matches the one nearest in time
+            to GT frame ``offset + t``.
 
     Returns:
         (drift, index): (..., T) ``min_j d(pred(t), gt_j)`` and its argmin j (the GT frame the
         arm "is at").
     """
-    from scipy.spatial import cKDTree
-
     p = np.asarray(pred, np.float64)
     g = np.asarray(gt, np.float64)
     if len(g) == 0:
         raise ValueError("best_match: the GT episode is empty")
-    drift, nearest = cKDTree(g).query(p.reshape(-1, g.shape[1]), k=1, workers=KDTREE_WORKERS)
-    nearest = np.minimum(nearest, len(g) - 1)  # the tree answers len(g) for an infinite distance
+    steps = p.shape[-2] if p.ndim >= 2 else 1
+    near = np.broadcast_to(offset + np.arange(steps), p.shape[:-1]).reshape(-1)
+    drift, nearest = nearest_poses(p.reshape(-1, g.shape[1]), g, near)
     # A GT hold (the arm at rest) repeats one pose over many frames, and every frame of it ties;
     # an arbitrary one of them would bias the tempo fit, so each match moves to the middle of its run.
     index = _middle_of_identical_runs(g)[nearest]
     return drift.reshape(p.shape[:-1]), index.reshape(p.shape[:-1])
+
+
+def nearest_poses(p: Array, g: Array, near: npt.NDArray[np.int64] | None = None) -> tuple[Array, npt.NDArray[np.int64]]:
+    """For each row of ``p`` (N, D): the distance to its nearest row of ``g`` (G, D), exactly as
+    ``sqrt(sum((p - g)^2))`` gives it, and that row's index: on a tie, the one closest to
+    ``near`` (N,) of that row, else the first.
+
+    One matrix product per block ranks the rows of ``g`` by ``|g|^2 - 2 p.g`` (the squared distance
+    less ``|p|^2``, the same along a row). Its rounding can only swap rows within a few ulps of the
+    best, so where more than one is that close, those are measured exactly. As quick as a KD-tree
+    query at these sizes (thousands of poses of 6 joints), without scipy.spatial's import (0.7 s of
+    CPU in every worker process that computes a row).
+    """
+    n, dims = p.shape
+    g2 = np.einsum("ij,ij->i", g, g)
+    slack_per_unit = 8 * dims * np.finfo(np.float64).eps  # bounds the product's rounding
+    g2_max = g2.max(initial=0.0)
+    dist = np.empty(n)
+    index = np.empty(n, np.int64)
+    step = max(1, NEAREST_BLOCK // len(g))
+    with np.errstate(invalid="ignore", over="ignore"):  # (non-finite poses: an infinite distance)
+        for s in range(0, n, step):
+            block = p[s:s + step]
+            ranked = block @ g.T
+            ranked *= -2.0
+            ranked += g2
+            best = ranked.argmin(axis=1)
+            slack = slack_per_unit * (np.einsum("ij,ij->i", block, block) + g2_max)
+            close = ranked <= (ranked[np.arange(len(block)), best] + slack)[:, None]
+            tied = np.flatnonzero(np.count_nonzero(close, axis=1) > 1)
+            if len(tied):
+                row, col = np.nonzero(close[tied])
+                exact = np.square(block[tied[row]] - g[col]).sum(axis=1)
+                apart = np.zeros_like(col) if near is None else np.abs(col - near[s + tied[row]])
+                order = np.lexsort((col, apart, exact, row))  # per row: the nearest pose, then in time
+                first = order[np.r_[True, row[order][1:] != row[order][:-1]]]
+                best[tied[row[first]]] = col[first]
+            dist[s:s + step] = np.sqrt(np.square(block - g[best]).sum(axis=1))
+            index[s:s + step] = best
+    far = ~np.isfinite(dist)
+    dist[far], index[far] = np.inf, len(g) - 1
+    return dist, index
 
 
 def _middle_of_identical_runs(gt: npt.NDArray[np.float64]) -> npt.NDArray[np.int64]:

@@ -112,7 +112,7 @@ def sweep_metrics(chunks: npt.ArrayLike, gt: npt.ArrayLike | None, units: Units 
     ta, gt_aligned, post = metrics.time_aligned(pred, gt, offset)
     out.gt_aligned, out.post_episode, out.time_aligned_drift = gt_aligned, post, ta
     if alignments:
-        bm, bm_index = metrics.best_match(pred, gt)
+        bm, bm_index = metrics.best_match(pred, gt, offset)
         out.best_match_drift, out.best_match_index = bm, bm_index
         out.tempo = np.asarray(metrics.tempo(bm_index, ~post), np.float64) if (~post).sum() >= 2 else np.full(B, np.nan)
         out.speed_mismatch, out.path_error = metrics.drift_split(ta, bm)
