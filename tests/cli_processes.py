@@ -33,9 +33,9 @@ import numpy  # noqa: F401  (what every command loads: paid once here)
 from inspector.cli import build_parser, main
 build_parser()  # (and the modules it reads defaults from)
 
-# What a command that computes rows imports (a second of CPU): imported here before the first
-# such command forks, and never for a module whose commands only refuse. Imports only: no thread
-# or pool is started before a fork.
+# What a command that reads rollouts or datasets imports (a second of CPU): imported here before
+# the first such command forks, and never for a module whose commands only refuse. Imports only:
+# no thread or pool is started before a fork.
 COMPUTING = {"report", "compare", "export", "import", "info"}
 ROW_MODULES = ("av", "pyarrow.parquet", "pyarrow.dataset", "pyarrow.compute",
                "inspector.report.build", "inspector.report.tasks", "inspector.analysis.sweep",
