@@ -147,14 +147,16 @@ def test_reverse_order_is_penalised_by_dtw_not_best_match():
     assert reverse_drift.mean() > 10.0
 
 
+@pytest.mark.parametrize("by", ["search", "tree"])
 @pytest.mark.parametrize("seed", range(40))
-def test_nearest_poses_is_the_exhaustive_search(seed):
+def test_nearest_poses_is_the_exhaustive_search(seed, by, monkeypatch):
     """Distances exactly as ``sqrt(sum((p - g)^2))`` gives them for the nearest GT pose, as a
     KD-tree answers them; the index: the nearest pose, and among poses tied at that distance
-    (held and revisited poses, whole-degree values) the one nearest in time to ``near``. Small
-    blocks, so that a search runs over several."""
+    (held and revisited poses, whole-degree values) the one nearest in time to ``near``. By the
+    search (small blocks, so that it runs over several) and by the tree that large batches use."""
     from scipy.spatial import cKDTree
 
+    monkeypatch.setattr(metrics, "KDTREE_PAIRS", 0 if by == "tree" else 1 << 62)
     rng = np.random.default_rng(seed)
     g = rng.normal(scale=rng.choice([1.0, 50.0, 1e6]), size=(int(rng.integers(1, 300)), 6))
     if seed % 3 == 0:  # holds: every pose ten times, and the first ones again at the end

@@ -256,6 +256,7 @@ def init_worker() -> None:
 
     video.DECODE_THREADS = "NONE"  # FFmpeg's default slice threads cost 25% more CPU a frame here
     metrics.DTW_THREADS = 1
+    metrics.KDTREE_WORKERS = 1
 
 
 def init_background_worker(niceness: int) -> None:
