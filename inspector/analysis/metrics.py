@@ -161,18 +161,16 @@ def _nearest_by_tree(p: Array, g: Array, near: npt.NDArray[np.int64] | None) -> 
     found, pose = cKDTree(distinct).query(p, k=2, workers=KDTREE_WORKERS)
     dist, pose = found[:, 0].copy(), pose[:, 0]
     # the frames of each distinct pose, in time order: sorted keys (pose, frame)
-    frames = np.lexsort((np.arange(len(g)), of_frame))
+    frames = np.argsort(of_frame, kind="stable")
     keys = of_frame[frames] * (len(g) + 1) + frames
-    at = pose * (len(g) + 1) + (np.zeros(len(p), np.int64) if near is None else np.clip(near, 0, len(g)))
-    after = np.minimum(np.searchsorted(keys, at), len(g) - 1)
-    before = np.maximum(after - 1, 0)
-    # the copy at or after ``near`` and the one before it, where they show this pose: the nearer
+    target = np.zeros(len(p), np.int64) if near is None else np.clip(near, 0, len(g))  # (none: the first copy)
+    at = np.searchsorted(keys, pose * (len(g) + 1) + target)
+    after, before = frames[np.minimum(at, len(g) - 1)], frames[np.maximum(at - 1, 0)]
+    # the copy at or after the target and the one before it, where they show this pose: the nearer
     # in time, the earlier on a tie
-    index = np.where(of_frame[frames[after]] == pose, frames[after], frames[before])
-    other = frames[before]
-    closer = (of_frame[other] == pose) & (np.abs(other - (index if near is None else near)) <= np.abs(
-        index - (index if near is None else near)))
-    index = np.where(closer, other, index).astype(np.int64)
+    index = np.where(of_frame[after] == pose, after, before)
+    closer = (of_frame[before] == pose) & (np.abs(before - target) <= np.abs(index - target))
+    index = np.where(closer, before, index).astype(np.int64)
     tied = np.flatnonzero(~(found[:, 1] > found[:, 0]))  # two distinct poses as near (or non-finite)
     if len(tied):
         dist[tied], index[tied] = _nearest_by_search(p[tied], g, None if near is None else near[tied])
