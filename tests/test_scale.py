@@ -78,8 +78,18 @@ def test_app_memory_follows_the_frame_budget(small_budget_app):
             assert app.frame_cache.bytes <= app.frame_cache.budget_bytes
         assert app.frame_cache.evictions > 0  # four rollouts' frames do not fit: the oldest went
 
-        # the last one's frames are still cached: reopened (here after its built timeline was
-        # dropped too, as the catalog does beyond KEEP_LOADED), it needs no decoding at all
+        # the last one's frames are the most recently used, GT frames the others cached first
+        # included: what the budget leaves beside them can be filled without evicting one
+        last = tab.loaded.frames
+        prefixes = [p for view in last.views for p in last._keys(view)]
+        theirs = sum(len(uri) for key, uri in list(app.frame_cache._items.items())
+                     if any(key[:len(p)] == p for p in prefixes))
+        spare = app.frame_cache.budget_bytes - theirs
+        for i in range(64):
+            app.frame_cache.put(("filler", i), "x" * (spare // 64))
+
+        # ... so reopened (here after its built timeline was dropped too, as the catalog does
+        # beyond KEEP_LOADED), it needs no decoding at all
         app.catalog._loaded.clear()
         assert tab.open(keys["prompt_train"])
         assert tab.loaded.frames.decoded.is_set()

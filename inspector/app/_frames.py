@@ -81,6 +81,15 @@ class FrameCache:
         with self._lock:
             return key in self._items
 
+    def touch(self, key: Hashable) -> bool:
+        """Mark ``key`` as just used, if it is cached (without counting a hit): a frame a fill
+        passes belongs to the rollout being opened, so it must not be the next one evicted."""
+        with self._lock:
+            if key not in self._items:
+                return False
+            self._items.move_to_end(key)
+            return True
+
     def put(self, key: Hashable, uri: str) -> None:
         """Keep ``uri``; an entry larger than the whole budget is not kept at all."""
         size = len(uri)
@@ -365,7 +374,9 @@ class FrameStore(Notifying):
     def _store(self, view: str, key: tuple, rgb: npt.NDArray[np.uint8]) -> None:
         size = self.display_size(view)
         full_key = (*key, size)
-        if full_key not in self._cache:
+        # a GT frame another rollout of the same episode cached is kept, and now counts as this
+        # rollout's: left at its old place it went first, and the rollout reopened half-cached
+        if not self._cache.touch(full_key):
             self._cache.put(full_key, jpeg_data_uri(rgb, size))
 
     # -- lookups on the scrub path (never decode) ---------------------------------------------
