@@ -376,40 +376,6 @@ def test_playback_is_a_video_the_browser_presents_at_the_rollout_rate(browser, d
     page.close()
 
 
-def _settled_frames(page, timeout_s: float = 30.0) -> dict[str, str]:
-    """The video panel's frames once two looks 0.5 s apart agree."""
-    deadline = time.time() + timeout_s
-    before = frame_sources(page)
-    while time.time() < deadline:
-        page.wait_for_timeout(500)
-        now = frame_sources(page)
-        if now == before and now:
-            return now
-        before = now
-    raise AssertionError("the video panel kept changing")
-
-
-def test_two_pages_hold_independent_timelines(browser, app):
-    p1, t1 = new_page(browser, app, draw_3d=False)
-    p2, t2 = new_page(browser, app, draw_3d=False)
-    open_in_page(p1, t1, app, LONG)
-    open_in_page(p2, t2, app, LONG)
-    # compare settled frames: until decoding ends, the panel changes from "loading" on its own
-    assert t2.loaded.frames.done.wait(timeout=60)
-    frames2 = _settled_frames(p2)
-    slider_thumb(p1, re.compile(r"^Chunk$")).focus()
-    p1.keyboard.press("End")
-    wait_until(lambda: t1.chunk == t1.loaded.timeline.n_chunks - 1, what="page 1 at the last chunk")
-    p2.wait_for_timeout(1000)
-    now2 = page_tab(p2, app)
-    assert now2 is not t1 and now2.step == 0
-    assert slider_thumb(p2, re.compile(r"^Chunk$")).get_attribute("aria-valuenow") == "0"
-    if now2 is t2:  # (a page whose websocket dropped under load reconnects as a fresh tab)
-        assert frame_sources(p2) == frames2
-    p1.close()
-    p2.close()
-
-
 def test_screenshot(browser, app, tmp_path):
     """Screenshots of the app (the 3D scene drawn): its 60-chunk rollout; with
     INSPECTOR_DOCS_SCREENSHOT=1 also the bundled demo, refreshing docs/screenshot.png, and the real

@@ -131,6 +131,7 @@ def test_four_browser_pages_hold_their_own_timelines(browser, app, server_errors
     chunk, step = re.compile(r"^Chunk$"), re.compile(r"^Step$")
     # Per page: the rollout picked in its picker (None: the one it opens with), the slider it
     # scrubs with the keyboard, how many steps right, and where that puts it (rollout, step).
+    # Pages 0 and 3 show the same rollout: each holds its own step and frame.
     default = app.catalog.default_key()
     plan = [(None, chunk, 3, default, 3 * 9), (LONG, chunk, 7, key(app, LONG), 7 * 9),
             (SINGLE, step, 4, key(app, SINGLE), 4), (None, chunk, 10, default, 10 * 9)]
