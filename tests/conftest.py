@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
+import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -205,7 +208,24 @@ BROWSER_FIXTURES = frozenset({"browser", "playwright"})
 
 
 def pytest_configure(config: pytest.Config) -> None:
+    _compile_once_a_run(config)
     worker_groups.configure(config)
+
+
+def _compile_once_a_run(config: pytest.Config) -> None:
+    """Where the environment says to write no bytecode (``PYTHONDONTWRITEBYTECODE``), every
+    process a run starts (the xdist workers, commands, report workers) compiled each module it
+    imported from source again, and each worker rewrote every test module's asserts again. The run
+    keeps compiled files in a folder of its own instead (``PYTHONPYCACHEPREFIX``), never in the
+    checkout, so each module is compiled once a run. Set here, before the workers start: they and
+    what they start inherit it."""
+    if not os.environ.get("PYTHONDONTWRITEBYTECODE") or hasattr(config, "workerinput"):
+        return
+    prefix = tempfile.mkdtemp(prefix="inspector-test-pycache-")
+    del os.environ["PYTHONDONTWRITEBYTECODE"]
+    os.environ["PYTHONPYCACHEPREFIX"] = prefix
+    sys.dont_write_bytecode, sys.pycache_prefix = False, prefix
+    config.add_cleanup(lambda: shutil.rmtree(prefix, ignore_errors=True))
 
 
 @pytest.hookimpl(optionalhook=True)
