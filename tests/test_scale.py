@@ -85,8 +85,9 @@ def test_app_memory_follows_the_frame_budget(small_budget_app):
         # included: what the budget leaves beside them can be filled without evicting one
         last = tab.loaded.frames
         prefixes = [p for view in last.views for p in last._keys(view)]
-        theirs = sum(len(uri) for key, uri in list(app.frame_cache._items.items())
-                     if any(key[:len(p)] == p for p in prefixes))
+        with app.frame_cache._lock:
+            cached = list(app.frame_cache._items.items())
+        theirs = sum(len(uri) for key, uri in cached if any(key[:len(p)] == p for p in prefixes))
         spare = app.frame_cache.budget_bytes - theirs
         for i in range(64):
             app.frame_cache.put(("filler", i), "x" * (spare // 64))
