@@ -124,9 +124,6 @@ WIDTH, HEIGHT = 1024, 700  # small pages: four of them render WebGL in software
 @pytest.mark.browser
 @pytest.mark.slow
 @pytest.mark.skipif(_browser_reason is not None, reason=_browser_reason or "")
-# A playback tick that is drawing when its page closes queues updates on the closed connection;
-# viser drops them with this warning (once per client). Benign, and not an error.
-@pytest.mark.filterwarnings("ignore:Queued a .* on a closed connection:UserWarning")
 def test_four_browser_pages_hold_their_own_timelines(browser, app, server_errors, capfd):  # noqa: F811
     chunk, step = re.compile(r"^Chunk$"), re.compile(r"^Step$")
     # Per page: the rollout picked in its picker (None: the one it opens with), the slider it

@@ -65,9 +65,6 @@ def small_budget_app():
     app.stop()
 
 
-# A frame fill that finishes as the client leaves redraws its tab on the closed connection; viser
-# drops that update with this warning. Benign, and not an error.
-@pytest.mark.filterwarnings("ignore:Queued a .* on a closed connection:UserWarning")
 def test_app_memory_follows_the_frame_budget(small_budget_app):
     from inspector.app import HeadlessClient
 
