@@ -869,6 +869,81 @@ def bench_keys(tmp: Path, quick: bool) -> list[Figure]:
                         f"canvas hidden); baseline: 3D canvas hidden")]
 
 
+def _browser_cpu_s() -> float:
+    """CPU seconds so far of every Chromium process this process started (through Playwright's
+    driver): the browser, its GPU process (where software WebGL draws) and its renderers."""
+    clk = os.sysconf("SC_CLK_TCK")
+    children: dict[int, list[int]] = {}
+    cpu: dict[int, float] = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            stat = Path(f"/proc/{entry}/stat").read_text()
+        except OSError:
+            continue
+        fields = stat[stat.rindex(")") + 2:].split()
+        children.setdefault(int(fields[1]), []).append(int(entry))
+        cpu[int(entry)] = (int(fields[11]) + int(fields[12])) / clk
+    total, todo = 0.0, list(children.get(os.getpid(), []))
+    while todo:
+        pid = todo.pop()
+        total += cpu.get(pid, 0.0)
+        todo += children.get(pid, [])
+    return total - sum(cpu.get(pid, 0.0) for pid in children.get(os.getpid(), []))  # not the driver
+
+
+LOAD_WINDOW_S = 30.0  # a page's first seconds: loaded (15-20 s in software) and idling
+
+
+def bench_page_load(tmp: Path, quick: bool) -> list[Figure]:
+    """What a page drawing WebGL in software (headless Chromium) costs the browser to load the app
+    on the demo: CPU seconds of all its processes in the page's first ``LOAD_WINDOW_S``,
+    beside the same page when its renderer names a GPU (it then gets the environment map, as every
+    page did before pages started plainly lit, and sets it up in software). A window of fixed
+    length: a page whose 3D view is on screen never idles (viser draws a frame every second)."""
+    sys.path.insert(0, str(REPO / "tests"))
+    from browser import launch, open_app, open_page, skip_reason, wait_until
+
+    if (reason := skip_reason()) is not None:
+        print(f"  page_load: skipped ({reason})", file=sys.stderr)
+        return []
+    from playwright.sync_api import sync_playwright
+
+    from inspector.app import serve
+
+    gpu_named = """for (const C of [WebGLRenderingContext, WebGL2RenderingContext]) {
+      const get = C.prototype.getParameter;
+      C.prototype.getParameter = function (p) { return p === 0x9246 ? 'NVIDIA GeForce RTX 4090' : get.call(this, p); }; }"""
+    repeats = 2 if quick else 3
+    loads: dict[str, list[float]] = {"software": [], "gpu": []}
+    app = serve([DEMO], port=0, block=False)
+    try:
+        with sync_playwright() as pw:
+            browser = launch(pw)
+            for _ in range(repeats):
+                for kind in ("software", "gpu"):
+                    page = open_page(browser, 1600, 1000)
+                    if kind == "gpu":
+                        page.add_init_script(gpu_named)
+                    cpu0, t0 = _browser_cpu_s(), time.monotonic()
+                    open_app(page, app.url)
+                    wait_until(lambda: page.evaluate("() => document.documentElement.dataset.inspectorWebgl") == kind,
+                               what="the page's renderer check")
+                    time.sleep(max(0.0, t0 + LOAD_WINDOW_S - time.monotonic()))
+                    loads[kind].append(_browser_cpu_s() - cpu0)
+                    page.close()
+            browser.close()
+    finally:
+        app.stop()
+    ours, gpu = (statistics.median(loads[kind]) for kind in ("software", "gpu"))
+    return [Figure("page_load_cpu", ours, "CPU-s", "< 0.5x baseline", ours < 0.5 * gpu, baseline=gpu,
+                   note=f"headless Chromium (WebGL in software), 1600x1000, the demo: CPU of all the browser's "
+                        f"processes in a page's first {LOAD_WINDOW_S:.0f} s (loaded, its 3D view drawn), median "
+                        f"of {repeats}; baseline: the same page naming a GPU renderer, which gets the "
+                        f"environment map (what every page got before)")]
+
+
 def _labelled_session(tmp: Path, name: str, n: int, labels: bool) -> Path:
     """``n`` single-chunk rollouts with GT joints and no video (what labelling and the outcome
     statistics cost, not decoding), with a label on each when ``labels``."""
@@ -1257,8 +1332,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--latest", action="store_true",
                         help="merge the figures into benchmarks/latest.json (by name) and rewrite the table in "
                              "benchmarks/README.md")
-    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback keys groot served eval clock "
-                                           "outcomes label rank")
+    parser.add_argument("--only", nargs="*", help="run only these groups: fk report export ray open scrub serve playback keys page_load groot "
+                                           "served eval clock outcomes label rank")
     args = parser.parse_args(argv)
 
     figures: list[Figure] = []
@@ -1275,6 +1350,7 @@ def main(argv: list[str] | None = None) -> int:
             ("serve", lambda: bench_serve(tmp, args.quick)),
             ("playback", lambda: bench_playback(tmp, args.quick)),
             ("keys", lambda: bench_keys(tmp, args.quick)),
+            ("page_load", lambda: bench_page_load(tmp, args.quick)),
             ("groot", lambda: bench_groot(tmp, args.quick)),
             ("served", lambda: bench_served(tmp, args.quick)),
             ("eval", lambda: bench_eval(tmp, args.quick)),

@@ -93,7 +93,13 @@ def test_the_pair_arms_are_drawn_side_by_side_named_by_side_only(tmp_path):
             a, b = np.array(side_origin("A")), np.array(side_origin("B"))
             assert np.linalg.norm(a - b) >= 0.5 and np.allclose(nodes["/ab/A"]["props"].get("position", a), a)
 
-            # "play arms" ticked: the arms move by themselves
+            # Plainly lit and still until the page finds a GPU; a page that does unticks Light 3D
+            # (this client stands for one): the environment map comes on and the arms play by themselves
+            assert client.control(client.find_control("play arms"))["value"] is False
+            client.set_gui_value(client.find_control("Light 3D"), False)
+            client.wait_until(lambda: client.control(client.find_control("play arms"))["value"] is True,
+                              what="play ticked")
+
             def moves() -> int:
                 return sum(c for n, c in client.pose_updates.items() if n.startswith("/ab/B/pred/"))
             before = moves()

@@ -189,6 +189,8 @@ def test_a_light_3d_page_gets_a_steps_frames_before_its_arms(app):
             return bool(np.allclose(tab.scene._ee_pred.position, ee_pred[step], atol=1e-6))
 
         with tab.lock:  # nothing else runs on this tab meanwhile
+            assert tab.controls.light_3d.value is True  # every page starts plainly lit (see _light_3d)
+            tab.controls.light_3d.value = False  # as a page with a GPU unticks it
             tab.set_step(50)
             assert posed_at(50)  # Light 3D off: all at once
             tab.controls.light_3d.value = True

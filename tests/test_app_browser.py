@@ -112,10 +112,10 @@ def test_one_3d_page_scene_keys_notes_and_light_3d(browser, app, tmp_path):
     then the Notes panel and, last as the page then draws slower, Light 3D unticked by the user
     (:func:`_notes_and_light_3d`)."""
     page, tab = new_page(browser, app)
-    # Light 3D first: the page ticks it by itself, once per connection, when it draws in software
-    wait_until(lambda: tab.controls.light_3d.value is True, what="the page to tick Light 3D")
-    wait_until(lambda: tab.hemisphere_light is not None and tab.hemisphere_light.visible,
-               what="the page's scene to get its plain light")
+    # Light 3D first: a page drawing in software keeps it ticked, as every page starts
+    assert wait_until(lambda: page.evaluate("() => document.documentElement.dataset.inspectorWebgl")) == "software"
+    assert tab.controls.light_3d.value is True
+    assert tab.hemisphere_light is not None and tab.hemisphere_light.visible
     open_in_page(page, tab, app, LONG)
     _scene_renders(page, tab, tmp_path)
     _keys_step_the_timeline_not_the_view(page, tab)
@@ -177,8 +177,8 @@ def _keys_step_the_timeline_not_the_view(page, tab) -> None:
 def _notes_and_light_3d(page, tab) -> None:
     """The panel's controls, the 60-chunk rollout open.
 
-    Light 3D: headless Chromium draws WebGL in software (SwiftShader): the page ticks "Light 3D"
-    by itself and the server turns that page's environment map off; a user who unticks it keeps it so.
+    Light 3D: headless Chromium draws WebGL in software (SwiftShader): "Light 3D" stays ticked, as
+    every page starts, and the page never gets an environment map; a user who unticks it keeps it so.
 
     Notes: each field carries the id its label points to (viser's text inputs have none of their
     own), and keeps it while typed into and after its folder is closed and opened again; typing
@@ -430,23 +430,39 @@ def _pick_rollout(app) -> str:
     return entries[0].tag
 
 
-def test_light_3d_ticked_before_the_tab_was_wired_still_lights_the_scene(browser, app, monkeypatch):
-    """On a slow start the page's GUI (and its script) can tick Light 3D before the server has
-    wired the box's callback: the tab applies the box's value once wired."""
+def test_a_page_with_a_gpu_unticks_light_3d_even_before_the_tab_was_wired(browser, app, monkeypatch):
+    """Every page starts plainly lit (Light 3D ticked, no environment map to set up); a page whose
+    WebGL renderer is a GPU unticks it and gets the environment map. On a slow start the page's GUI
+    (and its script) can untick it before the server has wired the box's callback: the tab applies
+    the box's value once wired. The GPU is the page's answer to the renderer query (Chromium here
+    draws in software)."""
     import inspector.app._state as state
 
     class SlowScene(state.TabScene):
         def __init__(self, *args, **kwargs):
-            time.sleep(6)  # the panel is already in the page; its script ticks the box meanwhile
+            time.sleep(6)  # the panel is already in the page; its script unticks the box meanwhile
             super().__init__(*args, **kwargs)
 
     monkeypatch.setattr(state, "TabScene", SlowScene)
+    page = open_page(browser, 1600, 1000)
+    page.add_init_script(GPU_RENDERER_JS)
     # the page looks at its WebGL renderer on a canvas of its own: the 3D view need not be drawn
-    page, tab = new_page(browser, app, draw_3d=False)
-    wait_until(lambda: tab.hemisphere_light is not None and tab.hemisphere_light.visible,
-               what="the page's scene to get its plain light")
-    assert tab.controls.light_3d.value is True
+    open_app(page, app.url, draw_3d=False)
+    tab = page_tab(page, app)
+    assert wait_until(lambda: page.evaluate("() => document.documentElement.dataset.inspectorWebgl")) == "gpu"
+    wait_until(lambda: tab.controls.light_3d.value is False and tab.hemisphere_light is not None
+               and not tab.hemisphere_light.visible, what="the page's scene to get its environment map")
     page.close()
+
+
+# The renderer a page with a GPU names (WEBGL_debug_renderer_info's UNMASKED_RENDERER_WEBGL, 0x9246).
+GPU_RENDERER_JS = """
+for (const C of [WebGLRenderingContext, WebGL2RenderingContext]) {
+  const get = C.prototype.getParameter;
+  C.prototype.getParameter = function (p) {
+    return p === 0x9246 ? 'ANGLE (NVIDIA, NVIDIA GeForce RTX 4090 Direct3D11 vs_5_0 ps_5_0, D3D11)' : get.call(this, p);
+  };
+}"""
 
 
 def test_the_camera_is_fitted_to_the_canvas_the_page_has(browser, app):

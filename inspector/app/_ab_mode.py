@@ -231,16 +231,18 @@ class ABTab:
         self.step = 0
         self._fps = 30.0
         gui = client.gui
+        apply_light_3d(client, True)  # plainly lit before the page draws anything (see ._light_3d)
         gui.configure_theme(control_width="large", show_share_button=False, brand_color=(230, 119, 0))
         with client.atomic():
-            # data-inspector-client: the Light 3D script ticks the box once per connection by it
+            # data-inspector-client: the Light 3D script unticks the box once per connection by it
             gui.add_html(f"<div data-inspector-client='{int(client.client_id)}' "
                          "style='font-weight:600;font-size:0.95rem;padding:0 0.2rem'>Blind A/B comparison"
                          f"{AB_KEYS_HTML}{LABEL_IDS_HTML}{LIGHT_3D_HTML if joint_links is not None else ''}</div>")
             self.pair_html = gui.add_html("")
             self.step_slider = gui.add_slider("step", 0, 1, 1, 0, hint="the arms' step (both sides)")
-            self.playing = gui.add_checkbox("play arms", True, hint="the arms play, looping, at the rollouts' rate")
-            self.light_3d = gui.add_checkbox(LIGHT_3D_LABEL, False, hint=LIGHT_3D_HINT)
+            # Light 3D until the page finds a GPU, and the arms still until then (see _light_3d)
+            self.playing = gui.add_checkbox("play arms", False, hint="the arms play, looping, at the rollouts' rate")
+            self.light_3d = gui.add_checkbox(LIGHT_3D_LABEL, True, hint=LIGHT_3D_HINT)
             self.step_slider.visible = self.playing.visible = self.light_3d.visible = joint_links is not None
             self.buttons = {answer: gui.add_button(label) for answer, label in ANSWER_BUTTONS.items()}
             gui.add_html("<div style='font-size:0.7rem;color:#6b7280;padding:0 0.2rem'>keys: A · B · = (tie)</div>")
@@ -257,8 +259,8 @@ class ABTab:
             button.on_click(lambda e, a=answer: self.vote(a) if e.client is not None else None)
         self.step_slider.on_update(lambda e: self._slid(int(e.target.value)) if e.client is not None else None)
         self.light_3d.on_update(lambda e: self._light_3d(bool(e.target.value)) if e.client is not None else None)
-        if self.light_3d.value:  # the page ticked it before the callback was there
-            self._light_3d(True)
+        if not self.light_3d.value:  # the page unticked it before the callback was there
+            self._light_3d(False)
         self.show_next()
         if self.arms is not None:
             threading.Thread(target=self._play, name="inspector-ab-arms", daemon=True).start()
@@ -275,12 +277,12 @@ class ABTab:
                     self.step_slider.value = self.step
 
     def _light_3d(self, light: bool) -> None:
-        """Plain lighting (see ``._light_3d``); ticked, by the page in a browser drawing WebGL in
-        software, it also stops the arms playing (four arms posed a few times a second there made
-        the vote keys wait seconds): the slider still poses them, and "play arms" can be ticked again."""
+        """Plain lighting (see ``._light_3d``), with the arms still: in a browser drawing WebGL in
+        software (where the box stays ticked) four arms posed a few times a second made the vote
+        keys wait seconds; the slider still poses them, and "play arms" can be ticked. Unticked (by
+        the page where it finds a GPU, or by the user), the environment map and the arms play."""
         apply_light_3d(self.client, light)
-        if light:
-            self.playing.value = False
+        self.playing.value = not light
 
     def _slid(self, step: int) -> None:
         """The user moved the step slider: the arms hold there (play is unticked)."""

@@ -2,9 +2,13 @@
 
 The 3D view lights the arms with an environment map. Drawn in software (SwiftShader, llvmpipe) it
 makes every frame of the view several times slower, and while a frame is drawn the page answers
-nothing: slider keys reached the server after ~2 s instead of ~70 ms. Each page looks at its own
-WebGL renderer once and, when it is a software one, ticks the panel's "Light 3D" box (the user can
-untick it); the server then turns that page's environment map off.
+nothing: slider keys reached the server after ~2 s instead of ~70 ms. Merely setting the map up
+(prefiltering its image for every roughness) took such a page ~6.5 s of CPU as it loaded.
+
+So every page starts plainly lit, the panel's "Light 3D" box ticked, and the environment map is
+sent only to a page that asks for it: each page looks at its own WebGL renderer once and, when it
+is a hardware one, unticks the box (the user can tick it again); the server then turns that page's
+environment map on. A page in software, or with no WebGL at all, never sets the map up.
 
 The script rides in the panel title's HTML (see ``._page_script``).
 """
@@ -17,35 +21,39 @@ from ._page_script import page_script_html
 
 LIGHT_3D_LABEL = "Light 3D"
 LIGHT_3D_HINT = ("Plain lighting, no environment map: the 3D view draws several times quicker in a "
-                 "browser without a GPU (ticked by itself there)")
+                 "browser without a GPU (unticked by itself where the page has one)")
 # viser's built-in environment map is this preset's image (potsdamer_platz_1k).
 DEFAULT_HDRI = "city"
 
-# Ticks the box once per connection (a reconnect is a new client, its box unticked): a user who
-# unticks it keeps it so.
-SOFTWARE_GL_JS = r"""
-let renderer = '';
+# Unticks the box once per connection where the page has a GPU (a reconnect is a new client, its box
+# ticked again): a user who ticks it again keeps it so.
+RENDERER_CHECK_JS = r"""
+let renderer = null;
 try {
   const gl = document.createElement('canvas').getContext('webgl');
-  const info = gl && gl.getExtension('WEBGL_debug_renderer_info');
-  renderer = info ? String(gl.getParameter(info.UNMASKED_RENDERER_WEBGL)) : '';
-  const lose = gl && gl.getExtension('WEBGL_lose_context');
-  if (lose) lose.loseContext();
+  if (gl) {
+    const info = gl.getExtension('WEBGL_debug_renderer_info');
+    renderer = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
+    const lose = gl.getExtension('WEBGL_lose_context');
+    if (lose) lose.loseContext();
+  }
 } catch (e) {}
-if (!/swiftshader|llvmpipe|softpipe|software/i.test(renderer)) return;
-let ticked = null;
+const kind = renderer === null ? 'none' : /swiftshader|llvmpipe|softpipe|software/i.test(renderer) ? 'software' : 'gpu';
+document.documentElement.dataset.inspectorWebgl = kind;  // what the page found (devtools, tests)
+if (kind !== 'gpu') return;
+let unticked = null;
 setInterval(() => {
   const client = document.querySelector('[data-inspector-client]')?.dataset.inspectorClient;
-  if (!client || client === ticked) return;
+  if (!client || client === unticked) return;
   const label = [...document.querySelectorAll('label[for]')].find((l) => l.textContent.trim() === __LABEL__);
   const box = label && document.getElementById(label.htmlFor);
   if (!box) return;
-  if (!box.checked) box.click();
-  ticked = client;
+  if (box.checked) box.click();
+  unticked = client;
 }, 500);
 """.replace("__LABEL__", json.dumps(LIGHT_3D_LABEL))
 
-LIGHT_3D_HTML = page_script_html("light_3d", SOFTWARE_GL_JS)
+LIGHT_3D_HTML = page_script_html("light_3d", RENDERER_CHECK_JS)
 
 
 # What lights the arms instead: a sky-to-table hemisphere light costs next to nothing to draw.

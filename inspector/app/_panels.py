@@ -70,8 +70,9 @@ class ControlPanel:
             self.notes_info = gui.add_html("")
         self.export = gui.add_button("Export .rrd", icon="download",
                                      hint="Download a Rerun recording of this rollout")
-        # outside any folder: the page's script finds it only while it is shown (see ._light_3d)
-        self.light_3d = gui.add_checkbox(LIGHT_3D_LABEL, False, hint=LIGHT_3D_HINT)
+        # outside any folder: the page's script finds it only while it is shown; ticked until the
+        # page finds a GPU (see ._light_3d)
+        self.light_3d = gui.add_checkbox(LIGHT_3D_LABEL, True, hint=LIGHT_3D_HINT)
 
     def key_of(self, option: str) -> str | None:
         return self.option_to_key.get(option)

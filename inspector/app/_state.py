@@ -96,7 +96,6 @@ class TabState:
         self.pairs: list[FramePair] = []
         self.compare_pairs: dict[str, FramePair] = {}  # view -> the compared rollout's frames
         self.export_result: str | None = None  # what the last export did (for tests and logs)
-        self.hemisphere_light = None  # Light 3D's light, once the box was first set (see ._light_3d)
         self._play_generation = 0
         self._video_html = ""
         self._clip: _Clip | None = None  # the playback clips the video panel is playing
@@ -109,6 +108,9 @@ class TabState:
         self.robot_note = ""
 
         catalog = app.catalog
+        # Plainly lit before the page draws anything: the environment map only for a page that
+        # finds a GPU (see ._light_3d).
+        self.hemisphere_light = apply_light_3d(client, True)
         gui = client.gui
         gui.configure_theme(control_width="large", show_share_button=False, brand_color=(230, 119, 0))
         with client.atomic():
@@ -783,8 +785,8 @@ class TabState:
         c.save_notes.on_click(user(lambda e: self.save_notes()))
         c.export.on_click(user(lambda e: self.export()))
         c.light_3d.on_update(user(lambda e: self._light_3d(bool(e.target.value))))
-        if c.light_3d.value:  # the page ticked it before the callback was there (a slow start)
-            self._light_3d(True)
+        if not c.light_3d.value:  # the page unticked it before the callback was there (a slow start)
+            self._light_3d(False)
         self.plots.joint.on_update(user(lambda e: self._show_joint(e.target.value)))
         # Step keys (ignored while typing in a text field; kept from viser's camera: see ._keys).
         actions = {
