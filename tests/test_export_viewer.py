@@ -1,5 +1,6 @@
-"""What a viewer shows: an exported recording opened in Rerun's web viewer (``rerun --serve-web``)
-in headless Chromium, WebGL in software, and both arms found on the screenshot."""
+"""What a viewer shows: an exported recording, shared as a file on a web server, opened by its URL
+in Rerun's web viewer (``rerun --serve-web URL``) in headless Chromium, WebGL in software, and both
+arms found on the screenshot."""
 
 from __future__ import annotations
 
@@ -56,6 +57,35 @@ def viewer_recording(tmp_path_factory) -> Path:
 
 
 DOCS_VIEWER = Path(__file__).resolve().parents[1] / "docs" / "rerun_viewer.png"
+
+
+class _SharedFiles:
+    """A folder served over HTTP on loopback, readable from any origin (CORS), as a recording
+    shared on a web server is: the web viewer, served from another port, fetches it from there."""
+
+    def __init__(self, folder: Path) -> None:
+        import functools
+        import threading
+        from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
+
+        class Handler(SimpleHTTPRequestHandler):
+            def end_headers(self) -> None:
+                self.send_header("Access-Control-Allow-Origin", "*")
+                super().end_headers()
+
+            def log_message(self, *args) -> None:  # quiet: the test's output is its findings
+                pass
+
+        self._server = ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(Handler, directory=str(folder)))
+        self.port = self._server.server_address[1]
+        threading.Thread(target=self._server.serve_forever, name="shared-files", daemon=True).start()
+
+    def url(self, name: str) -> str:
+        return f"http://127.0.0.1:{self.port}/{name}"
+
+    def close(self) -> None:
+        self._server.shutdown()
+        self._server.server_close()
 
 
 def _rerun_binary() -> Path:
@@ -131,22 +161,27 @@ def _arm_pixels(png: bytes) -> tuple[int, int, tuple[float, float]]:
 @pytest.mark.slow
 @pytest.mark.browser
 def test_web_viewer_draws_both_arms(viewer_recording, tmp_path, playwright):
-    """Open an exported recording in Rerun's web viewer (``rerun --serve-web``, loopback only) in
-    Debian Chromium, WebGL2 rendered by SwiftShader, and look at the 3D view: the opaque yellow
+    """Share an exported recording as a file on a web server and open it by its URL in Rerun's web
+    viewer (``rerun --serve-web URL``, loopback only) in Debian Chromium, WebGL2 rendered by
+    SwiftShader, and look at the 3D view: the opaque yellow
     GT arm and the translucent blue prediction must both be drawn (an arm whose URDF root is not
     tied to the view's frame leaves the view empty), in the top-left of the page where the
     recording's own layout puts the 3D view (a viewer that ignores it lays views out by
     heuristics, with side panels open). The last screenshot is kept as ``<tmp_path>/viewer.png``."""
+    import urllib.parse
     import urllib.request
 
     from browser import PAGE_TIMEOUT_S, SWIFTSHADER_ARGS, launch, wait_until
 
-    web_port, grpc_port = _free_port(), _free_port()
+    # By URL, not ``rerun --serve-web FILE``: that serves the file over gRPC, which (rerun 0.41)
+    # keeps a core busy for as long as it runs, a third of what this test would cost.
+    shared = _SharedFiles(viewer_recording.parent)
+    rrd_url = shared.url(viewer_recording.name)
+    web_port = _free_port()
     log = tmp_path / "rerun.log"
     with open(log, "wb") as out:
         viewer = subprocess.Popen(
-            [str(_rerun_binary()), str(viewer_recording), "--serve-web", "--bind", "127.0.0.1",
-             "--web-viewer-port", str(web_port), "--port", str(grpc_port)],
+            [str(_rerun_binary()), rrd_url, "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port", str(web_port)],
             stdout=out, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent, start_new_session=True)
     try:
         def web_viewer_answers() -> bool:
@@ -164,8 +199,7 @@ def test_web_viewer_draws_both_arms(viewer_recording, tmp_path, playwright):
             page = browser.new_page(viewport={"width": 1280, "height": 800})
             if not page.evaluate("() => !!document.createElement('canvas').getContext('webgl2')"):
                 pytest.skip("Chromium has no WebGL2, even with SwiftShader (--use-angle=swiftshader)")
-            grpc = f"rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc_port}%2Fproxy"
-            page.goto(f"http://127.0.0.1:{web_port}/?url={grpc}")
+            page.goto(f"http://127.0.0.1:{web_port}/?url={urllib.parse.quote(rrd_url, safe='')}")
             page.wait_for_selector("canvas", timeout=PAGE_TIMEOUT_S * 1000)
             shot = tmp_path / "viewer.png"
             found: tuple = (0, 0, None)
@@ -192,4 +226,5 @@ def test_web_viewer_draws_both_arms(viewer_recording, tmp_path, playwright):
             browser.close()
     finally:
         _stop_group(viewer)
-    assert not _listening_on(web_port) and not _listening_on(grpc_port), "the viewer outlived the test"
+        shared.close()
+    assert not _listening_on(web_port), "the viewer outlived the test"
