@@ -265,12 +265,12 @@ def _close(a, b, path: str, rel: float) -> None:
 
 @pytest.fixture(scope="module")
 def demo_reports(tmp_path_factory) -> dict[str, dict]:
-    """The demo's report (at the margin of the all-in-memory version, 0) three ways: one worker
-    filling a metrics cache, two workers without it, two workers from that cache."""
+    """The demo's report (at the margin of the all-in-memory version, 0) two ways: computed by two
+    workers, filling a metrics cache, and read from that cache in this process. (How rollouts are
+    cut into tasks never shows in a row: ``test_a_rollouts_numbers_do_not_depend_on_its_batch``.)"""
     cache = str(tmp_path_factory.mktemp("demo-cache"))
-    return {"one": build_report([str(DEMO)], jobs=1, cache_dir=cache, limit_margin_deg=0.0),
-            "two": build_report([str(DEMO)], jobs=2, use_cache=False, limit_margin_deg=0.0),
-            "cached": build_report([str(DEMO)], jobs=2, cache_dir=cache, limit_margin_deg=0.0)}
+    return {"two": build_report([str(DEMO)], jobs=2, cache_dir=cache, limit_margin_deg=0.0),
+            "cached": build_report([str(DEMO)], jobs=1, cache_dir=cache, limit_margin_deg=0.0)}
 
 
 def test_report_gives_the_numbers_it_gave_before_streaming(demo_reports):
@@ -299,8 +299,8 @@ def test_report_gives_the_numbers_it_gave_before_streaming(demo_reports):
         assert row["limit_violations"]["by_joint"] == old["limit_violations"]["by_joint"]
 
 
-def test_report_is_the_same_with_one_or_two_workers_and_from_the_cache(demo_reports):
-    assert demo_reports["one"] == demo_reports["two"] == demo_reports["cached"]
+def test_report_is_the_same_from_the_cache(demo_reports):
+    assert demo_reports["cached"]["rollouts"] and demo_reports["two"] == demo_reports["cached"]
 
 
 def test_a_rollouts_numbers_do_not_depend_on_its_batch():
