@@ -871,26 +871,17 @@ def bench_keys(tmp: Path, quick: bool) -> list[Figure]:
 
 def _browser_cpu_s() -> float:
     """CPU seconds so far of every Chromium process this process started (through Playwright's
-    driver): the browser, its GPU process (where software WebGL draws) and its renderers."""
-    clk = os.sysconf("SC_CLK_TCK")
-    children: dict[int, list[int]] = {}
-    cpu: dict[int, float] = {}
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit():
-            continue
-        try:
-            stat = Path(f"/proc/{entry}/stat").read_text()
-        except OSError:
-            continue
-        fields = stat[stat.rindex(")") + 2:].split()
-        children.setdefault(int(fields[1]), []).append(int(entry))
-        cpu[int(entry)] = (int(fields[11]) + int(fields[12])) / clk
-    total, todo = 0.0, list(children.get(os.getpid(), []))
-    while todo:
-        pid = todo.pop()
-        total += cpu.get(pid, 0.0)
-        todo += children.get(pid, [])
-    return total - sum(cpu.get(pid, 0.0) for pid in children.get(os.getpid(), []))  # not the driver
+    driver, which is not counted): the browser, its GPU process (where software WebGL draws) and
+    its renderers."""
+    import psutil
+
+    total = 0.0
+    for driver in psutil.Process().children():
+        for p in _children(driver):
+            with contextlib.suppress(psutil.Error):
+                times = p.cpu_times()
+                total += times.user + times.system
+    return total
 
 
 LOAD_WINDOW_S = 30.0  # a page's first seconds: loaded (15-20 s in software) and idling
@@ -903,7 +894,7 @@ def bench_page_load(tmp: Path, quick: bool) -> list[Figure]:
     page did before pages started plainly lit, and sets it up in software). A window of fixed
     length: a page whose 3D view is on screen never idles (viser draws a frame every second)."""
     sys.path.insert(0, str(REPO / "tests"))
-    from browser import launch, open_app, open_page, skip_reason, wait_until
+    from browser import GPU_RENDERER_JS, launch, open_app, open_page, skip_reason, wait_until
 
     if (reason := skip_reason()) is not None:
         print(f"  page_load: skipped ({reason})", file=sys.stderr)
@@ -912,9 +903,6 @@ def bench_page_load(tmp: Path, quick: bool) -> list[Figure]:
 
     from inspector.app import serve
 
-    gpu_named = """for (const C of [WebGLRenderingContext, WebGL2RenderingContext]) {
-      const get = C.prototype.getParameter;
-      C.prototype.getParameter = function (p) { return p === 0x9246 ? 'NVIDIA GeForce RTX 4090' : get.call(this, p); }; }"""
     repeats = 2 if quick else 3
     loads: dict[str, list[float]] = {"software": [], "gpu": []}
     app = serve([DEMO], port=0, block=False)
@@ -925,7 +913,7 @@ def bench_page_load(tmp: Path, quick: bool) -> list[Figure]:
                 for kind in ("software", "gpu"):
                     page = open_page(browser, 1600, 1000)
                     if kind == "gpu":
-                        page.add_init_script(gpu_named)
+                        page.add_init_script(GPU_RENDERER_JS)
                     cpu0, t0 = _browser_cpu_s(), time.monotonic()
                     open_app(page, app.url)
                     wait_until(lambda: page.evaluate("() => document.documentElement.dataset.inspectorWebgl") == kind,

@@ -86,6 +86,17 @@ setInterval(() => {
 }, 100);"""
 
 
+# Makes a page's WebGL renderer query (WEBGL_debug_renderer_info's UNMASKED_RENDERER_WEBGL, 0x9246)
+# name a GPU, as a page with one does (an init script): the app then gives it the environment map.
+GPU_RENDERER_JS = """
+for (const C of [WebGLRenderingContext, WebGL2RenderingContext]) {
+  const get = C.prototype.getParameter;
+  C.prototype.getParameter = function (p) {
+    return p === 0x9246 ? 'ANGLE (NVIDIA, NVIDIA GeForce RTX 4090 Direct3D11 vs_5_0 ps_5_0, D3D11)' : get.call(this, p);
+  };
+}"""
+
+
 def open_app(page, url: str, full_resolution: bool = False, draw_3d: bool = True) -> None:
     """Load the app and wait until its controls and first video frames are there (the 3D view
     off-screen, never drawn, unless ``draw_3d``)."""

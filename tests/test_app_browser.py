@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 from browser import (
     ARM_AND_VIDEO_STEP,
+    GPU_RENDERER_JS,
     canvas_is_drawn,
     frame_sources,
     hide_software_webgl_notice,
@@ -453,16 +454,6 @@ def test_a_page_with_a_gpu_unticks_light_3d_even_before_the_tab_was_wired(browse
     wait_until(lambda: tab.controls.light_3d.value is False and tab.hemisphere_light is not None
                and not tab.hemisphere_light.visible, what="the page's scene to get its environment map")
     page.close()
-
-
-# The renderer a page with a GPU names (WEBGL_debug_renderer_info's UNMASKED_RENDERER_WEBGL, 0x9246).
-GPU_RENDERER_JS = """
-for (const C of [WebGLRenderingContext, WebGL2RenderingContext]) {
-  const get = C.prototype.getParameter;
-  C.prototype.getParameter = function (p) {
-    return p === 0x9246 ? 'ANGLE (NVIDIA, NVIDIA GeForce RTX 4090 Direct3D11 vs_5_0 ps_5_0, D3D11)' : get.call(this, p);
-  };
-}"""
 
 
 def test_the_camera_is_fitted_to_the_canvas_the_page_has(browser, app):
