@@ -636,6 +636,42 @@ def test_ctrl_c_ends_serve_even_when_the_app_hangs_stopping(sessions):  # noqa: 
     assert "most recent call first" in out and "<lambda>" in out, out  # the stuck thread's stack
 
 
+THREADS_COMING_AND_GOING = """
+import sys, threading
+from inspector.app._stop_watchdog import exit_if_stopping_hangs
+
+def short_lived():
+    def deep(n):
+        return 0 if n == 0 else deep(n - 1) + 1
+    deep(30)
+
+def churn():  # threads start and end while the stacks are printed
+    while True:
+        threads = [threading.Thread(target=short_lived) for _ in range(8)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+
+for _ in range(2):
+    threading.Thread(target=churn, daemon=True).start()
+exit_if_stopping_hangs(float(sys.argv[1]))
+threading.Event().wait()  # the stop that never returns
+"""
+
+
+def test_a_hung_stop_prints_its_stacks_and_exits_while_other_threads_come_and_go():
+    """The stacks of a hung stop are read while other threads stand still: read from under
+    running threads (faulthandler's C watchdog), a thread ending mid-read crashed the process
+    (SIGSEGV, about one exit in four here) instead of exiting 1 with every stack printed."""
+    codes = []
+    for attempt in range(12):
+        done = subprocess.run([sys.executable, "-c", THREADS_COMING_AND_GOING, f"{0.2 + 0.05 * attempt:.2f}"],
+                              capture_output=True, text=True, timeout=120)
+        codes.append(done.returncode)
+        assert done.returncode == 1 and "most recent call first" in done.stderr, (codes, done.stderr[-2000:])
+
+
 def test_share_url_only_on_share(sessions, monkeypatch):  # noqa: F811
     import viser
 

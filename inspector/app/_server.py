@@ -24,6 +24,7 @@ from ._frames import FrameCache
 from ._overview_rows import OverviewRows, start_workers
 from ._robot import SharedRobot, joint_child_links
 from ._state import TabState
+from ._stop_watchdog import exit_if_stopping_hangs
 
 # Background frame loaders, one per camera view of an opening rollout (up to four): decoding and
 # JPEG encoding run outside the GIL, so views fill side by side and the cores stay busy.
@@ -256,7 +257,7 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
         pass
     finally:
         if exit_when_stopped:
-            _exit_if_stopping_hangs(STOP_GRACE_S)
+            exit_if_stopping_hangs(STOP_GRACE_S)
         app.stop()
         restore_sigterm()
     if exit_when_stopped:
@@ -264,16 +265,6 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
         sys.stderr.flush()
         os._exit(0)  # the app and its temporary sessions are gone: nothing is left to clean up
     return app
-
-
-def _exit_if_stopping_hangs(grace_s: float) -> None:
-    """Ctrl-C always ends the command: should stopping the app take over ``grace_s`` (a thread
-    holding a tab, a stuck close), every thread's stack is printed, so the hang can be found, and
-    the process exits (code 1). faulthandler's watchdog is a C thread: it fires even while a
-    thread holds the GIL."""
-    import faulthandler
-
-    faulthandler.dump_traceback_later(grace_s, exit=True, file=sys.stderr)
 
 
 def _stop_on_sigterm():
