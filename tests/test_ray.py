@@ -1,10 +1,10 @@
-"""``--ray``: report and export jobs as Ray tasks, on a real local Ray instance of 2 CPUs.
+"""``--ray``: report and export jobs as Ray tasks, on real Ray instances of 2 CPUs.
 
-Ray starts slowly (seconds), so the tests are few: the command line's report is compared with the
-local run's JSON (its own Ray, in the command's process, and a head started by ``ray start``, as
-a cluster user joins one); the rest share one local instance that this module starts in the test
-process and stops at its end, checking that Ray's processes went with it. Addresses that lead
-nowhere are refused in seconds without Ray.
+Ray starts slowly (seconds), so the instances are two, one after the other: the command line's
+report is compared with the local run's JSON on a head started by ``ray start`` (as a cluster
+user joins one); the rest share one local instance that this module starts in the test process
+(as ``--ray`` without an address starts one) and stops at its end, checking that Ray's processes
+went with it. Addresses that lead nowhere are refused in seconds without Ray.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import sys
 import tempfile
 import time
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -80,39 +81,7 @@ def broken_demo(tmp_path: Path) -> Path:
 
 
 # ----------------------------------------------------------------------------------------------
-# The command line, each run with its own Ray (before this module's shared instance starts)
-
-
-# Two GT episodes: the prompt pair and another rollout of episode 0 (one task of three rollouts,
-# cut in two for 2 CPUs), and two single chunks of episode 1 (a task of their own)
-REPORT_TAGS = ("bias_elbow", "prompt_novel", "prompt_train", "single_f000", "single_f076")
-
-
-@pytest.fixture(scope="module")
-def demo_reports(tmp_path_factory) -> dict:
-    """``report --json`` of a copy of five demo rollouts (:data:`REPORT_TAGS`), locally
-    (``--jobs 1``: in the command's process) and with ``--ray`` (a local Ray instance of the
-    command's own, started before this module's shared one); the Ray run's metrics cache is kept
-    for :func:`test_ray_workers_honour_the_metrics_cache`."""
-    tmp = tmp_path_factory.mktemp("demo-reports")
-    session = demo_copy(tmp, REPORT_TAGS)
-    before = ray_processes()
-    local = inspector("report", session, "--json", "--jobs", "1", cache_dir=tmp / "cache-local")
-    assert local.returncode == 0, local.stderr
-    on_ray = inspector("report", session, "--json", "--ray", "--jobs", "2", cache_dir=tmp / "cache-ray")
-    assert on_ray.returncode == 0, on_ray.stderr
-    return {"local": local, "ray": on_ray, "session": session, "ray_cache": tmp / "cache-ray",
-            "ray_left": wait_gone(ray_processes() - before)}
-
-
-def test_report_json_on_ray_is_the_local_report(demo_reports):
-    local, on_ray = demo_reports["local"], demo_reports["ray"]
-    assert "inspector: Ray at local, 2 CPU(s)" in on_ray.stderr
-    assert json.loads(on_ray.stdout) == json.loads(local.stdout)
-    report = json.loads(on_ray.stdout)
-    assert sorted(r["tag"] for r in report["rollouts"]) == sorted(REPORT_TAGS)  # every rollout copied
-    assert report["prompt_divergence"]  # the prompt pair
-    assert not demo_reports["ray_left"], "Ray processes outlived the command"
+# The command line, joining a head started by ``ray start`` (as a cluster user joins one)
 
 
 def free_ports(k: int) -> list[int]:
@@ -125,19 +94,19 @@ def free_ports(k: int) -> list[int]:
     return ports
 
 
-def test_report_json_on_a_running_head_is_the_local_report(tmp_path):
-    """``--ray HOST:PORT`` to a head started by ``ray start --head`` (1 CPU, two short rollouts);
-    every process of the head is gone once it is stopped."""
+@contextlib.contextmanager
+def running_head(log: Path) -> Iterator[dict]:
+    """A Ray head of 2 CPUs started by ``ray start --head`` with token authentication, as a
+    cluster's is: ``{"address": HOST:PORT, "auth": the environment that carries its token}``.
+    Every process it started is gone once it is stopped."""
     import psutil
 
-    session = demo_copy(tmp_path, ("single_f000", "single_f076"))
     port, client_port, agent_port = free_ports(3)
     temp_dir = Path(tempfile.mkdtemp(prefix="ray-", dir="/tmp"))  # Ray's socket paths must be short
-    log = tmp_path / "head.log"
     auth = {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": uuid.uuid4().hex}  # not ~/.ray/auth_token, if any
     with open(log, "w") as out:
-        head = subprocess.Popen([str(Path(sys.executable).with_name("ray")), "start", "--head", "--block",
-                                 "--num-cpus", "1", "--include-dashboard=false", "--disable-usage-stats",
+        proc = subprocess.Popen([str(Path(sys.executable).with_name("ray")), "start", "--head", "--block",
+                                 "--num-cpus", "2", "--include-dashboard=false", "--disable-usage-stats",
                                  "--node-ip-address", "127.0.0.1", "--port", str(port),
                                  "--ray-client-server-port", str(client_port),
                                  "--dashboard-agent-listen-port", str(agent_port), "--temp-dir", str(temp_dir)],
@@ -147,34 +116,65 @@ def test_report_json_on_a_running_head_is_the_local_report(tmp_path):
     try:
         deadline = time.monotonic() + 120
         while "Ray runtime started" not in log.read_text():
-            assert head.poll() is None and time.monotonic() < deadline, log.read_text()[-2000:]
+            assert proc.poll() is None and time.monotonic() < deadline, log.read_text()[-2000:]
             time.sleep(0.5)
-        start = time.monotonic()  # no token sent: one line, at once, not Ray's minute of retries
-        refused = inspector("report", session, "--ray", f"127.0.0.1:{port}", cache_dir=tmp_path / "cache-ray",
-                            env={"RAY_AUTH_MODE": "disabled"})
-        assert time.monotonic() - start < 30
-        assert refused.returncode == 2 and refused.stderr == (
-            f"error: 127.0.0.1:{port}: the cluster requires token authentication: set RAY_AUTH_MODE=token, with "
-            "the cluster's token in RAY_AUTH_TOKEN, RAY_AUTH_TOKEN_PATH or ~/.ray/auth_token\n")
-        local = inspector("report", session, "--json", "--jobs", "1", cache_dir=tmp_path / "cache-local")
-        assert local.returncode == 0, local.stderr
-        on_ray = inspector("report", session, "--json", "--ray", f"127.0.0.1:{port}", cache_dir=tmp_path / "cache-ray",
-                           env=auth)
-        assert on_ray.returncode == 0, on_ray.stderr
-        assert f"inspector: Ray at 127.0.0.1:{port}, 1 CPU(s)" in on_ray.stderr
-        assert json.loads(on_ray.stdout) == json.loads(local.stdout)
-        assert len(json.loads(on_ray.stdout)["rollouts"]) == 2
+        yield {"address": f"127.0.0.1:{port}", "auth": auth}
     finally:
         with contextlib.suppress(psutil.Error):
-            started = psutil.Process(head.pid).children(recursive=True)
-        head.terminate()  # ray start --block stops what it started
-        head.wait(60)
+            started = psutil.Process(proc.pid).children(recursive=True)
+        proc.terminate()  # ray start --block stops what it started
+        proc.wait(60)
         _, alive = psutil.wait_procs(started, timeout=30)
         for p in alive:
             with contextlib.suppress(psutil.Error):
                 p.kill()
         shutil.rmtree(temp_dir, ignore_errors=True)
     assert not alive, f"the head's processes outlived it: {[p.pid for p in alive]}"
+
+
+# Two GT episodes: the prompt pair and another rollout of episode 0 (one task of three rollouts,
+# cut in two for 2 CPUs), and two single chunks of episode 1 (a task of their own)
+REPORT_TAGS = ("bias_elbow", "prompt_novel", "prompt_train", "single_f000", "single_f076")
+
+
+@pytest.fixture(scope="module")
+def demo_reports(tmp_path_factory) -> dict:
+    """``report --json`` of a copy of five demo rollouts (:data:`REPORT_TAGS`), locally
+    (``--jobs 1``: in the command's process) and with ``--ray`` on a head started for it (gone
+    before this module's local instance starts), and the head asked without its token; the Ray
+    run's metrics cache is kept for :func:`test_ray_workers_honour_the_metrics_cache`."""
+    tmp = tmp_path_factory.mktemp("demo-reports")
+    session = demo_copy(tmp, REPORT_TAGS)
+    local = inspector("report", session, "--json", "--jobs", "1", cache_dir=tmp / "cache-local")
+    assert local.returncode == 0, local.stderr
+    with running_head(tmp / "head.log") as head:
+        on_ray = inspector("report", session, "--json", "--ray", head["address"], cache_dir=tmp / "cache-ray",
+                           env=head["auth"])
+        assert on_ray.returncode == 0, on_ray.stderr
+        start = time.monotonic()
+        refused = inspector("report", session, "--ray", head["address"], cache_dir=tmp / "cache-refused",
+                            env={"RAY_AUTH_MODE": "disabled"})
+        refused_s = time.monotonic() - start
+    return {"local": local, "ray": on_ray, "session": session, "ray_cache": tmp / "cache-ray",
+            "address": head["address"], "refused": refused, "refused_s": refused_s}
+
+
+def test_report_json_on_a_running_head_is_the_local_report(demo_reports):
+    local, on_ray = demo_reports["local"], demo_reports["ray"]
+    assert f"inspector: Ray at {demo_reports['address']}, 2 CPU(s)" in on_ray.stderr
+    assert json.loads(on_ray.stdout) == json.loads(local.stdout)
+    report = json.loads(on_ray.stdout)
+    assert sorted(r["tag"] for r in report["rollouts"]) == sorted(REPORT_TAGS)  # every rollout copied
+    assert report["prompt_divergence"]  # the prompt pair
+
+
+def test_a_head_that_wants_a_token_is_one_line_without_one(demo_reports):
+    """No token sent: one line, at once, not Ray's minute of retries."""
+    refused, address = demo_reports["refused"], demo_reports["address"]
+    assert demo_reports["refused_s"] < 30
+    assert refused.returncode == 2 and refused.stderr == (
+        f"error: {address}: the cluster requires token authentication: set RAY_AUTH_MODE=token, with "
+        "the cluster's token in RAY_AUTH_TOKEN, RAY_AUTH_TOKEN_PATH or ~/.ray/auth_token\n")
 
 
 def test_unreachable_cluster_is_one_line(tmp_path):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import os
 import signal
 import sys
@@ -167,8 +168,10 @@ class InspectorApp:
         self.sources.close()
 
 
+@functools.lru_cache(maxsize=1)
 def _load_robot() -> SharedRobot:
-
+    """The FK chain and the arm's meshes, loaded once a process: apps served one after another
+    in a process (a notebook's, a test run's) share them; every use of its URDF takes its lock."""
     kinematics()  # build the FK chain now rather than on the first rollout open
     return SharedRobot()
 
