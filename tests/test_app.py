@@ -530,3 +530,38 @@ def test_playback_swaps_in_clips_of_the_shown_frames_and_back(app):
         tab.set_step(tab.step + 1)
         assert "<video" not in tab.video.html.content
         tab.pause()
+
+
+def test_a_closed_tab_stops_encoding_its_playback_clips(app, monkeypatch):
+    """A tab closed (or paused) while its clips encode stops encoding them: no CPU goes on clips
+    no one will see. Each panel's encoding is held at its start until the tab has closed."""
+    import inspector.app._state as state_module
+    from inspector.app._playback_clip import ASK_EVERY, ClipNotWanted, encode_clip
+
+    closed, started, ended = threading.Event(), [], []
+
+    def encode_once_closed(uris, fps, wanted=lambda: True):
+        started.append(len(uris))
+        assert closed.wait(60), "the tab was never closed"
+        try:
+            uri = encode_clip(uris, fps, wanted)
+        except ClipNotWanted:
+            ended.append("stopped")
+            raise
+        ended.append("finished")
+        return uri
+
+    monkeypatch.setattr(state_module, "encode_clip", encode_once_closed)
+    client, tab = connect(app)
+    with client:
+        tab.open(key(app, LONG))
+        wait_until(tab.loaded.frames.done.is_set, timeout=120, what="the frames")
+        tab.speed = 0.3  # a speed of its own: no clip of it is cached yet
+        tab.play()
+        panels = {(p.view, k) for p in tab.pairs for k, uri in (("imagined", p.imagined), ("gt", p.gt)) if uri}
+        wait_until(lambda: len(started) == len(panels), timeout=60, what="every panel's clip to start encoding")
+        assert min(started) > ASK_EVERY
+        tab.close()
+        closed.set()
+        wait_until(lambda: len(ended) == len(panels), timeout=60, what="every panel's encoding to end")
+    assert ended == ["stopped"] * len(panels)

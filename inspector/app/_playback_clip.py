@@ -14,7 +14,7 @@ Pause (or a seek, a speed or view change, or the rollout's end) brings the image
 from __future__ import annotations
 
 import base64
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -30,23 +30,34 @@ CLIP_STEPS = 600
 ENABLED = True
 
 
-def encode_clip(uris: Sequence[str], fps: float) -> str:
+class ClipNotWanted(Exception):
+    """Encoding stopped part-way: the playback it was for has ended (Pause, a seek, a closed tab)."""
+
+
+def encode_clip(uris: Sequence[str], fps: float, wanted: Callable[[], bool] = lambda: True) -> str:
     """JPEG data URIs, one per step, -> an H.264 MP4 data URI playing them at ``fps`` frames/s.
 
     A URI repeated from the previous step (a GT frame that stays) is decoded once; H.264 codes the
-    repeat in a few bytes.
+    repeat in a few bytes. ``wanted`` is asked every :data:`ASK_EVERY` frames: once it says no,
+    the encoding stops (:class:`ClipNotWanted`) rather than finishing a clip no one will see.
     """
     # A keyframe every 2 s: a clip swapped in mid-segment (``#t=``) seeks quickly.
-    data = encode_h264_bytes(_decoded(uris), fps, crf=26, preset="ultrafast", name="playback clip",
+    data = encode_h264_bytes(_decoded(uris, wanted), fps, crf=26, preset="ultrafast", name="playback clip",
                              keyframe_every=max(1, round(2 * fps)))
     return "data:video/mp4;base64," + base64.b64encode(data).decode("ascii")
 
 
-def _decoded(uris: Sequence[str]) -> Iterator[npt.NDArray[np.uint8]]:
+# Frames between two looks at whether a clip is still wanted (a tenth of a second of encoding).
+ASK_EVERY = 60
+
+
+def _decoded(uris: Sequence[str], wanted: Callable[[], bool]) -> Iterator[npt.NDArray[np.uint8]]:
     import simplejpeg
 
     previous, rgb = None, None
-    for uri in uris:
+    for i, uri in enumerate(uris):
+        if i % ASK_EVERY == ASK_EVERY - 1 and not wanted():
+            raise ClipNotWanted
         if uri != previous:
             rgb = simplejpeg.decode_jpeg(base64.b64decode(uri.split(",", 1)[1]), colorspace="RGB")
             previous = uri

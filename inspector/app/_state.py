@@ -24,6 +24,7 @@ from __future__ import annotations
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, cast
@@ -584,8 +585,8 @@ class TabState:
             if clip is None:
                 return
             try:
-                clip.encode()
-            except Exception:  # noqa: BLE001 - the images keep playing: nothing is lost
+                clip.encode(wanted=lambda: generation == self._play_generation and not self.closed.is_set())
+            except Exception:  # noqa: BLE001 - the images keep playing (or playback ended): nothing is lost
                 return
             with self.lock:
                 if generation != self._play_generation or not self.playing:
@@ -898,14 +899,15 @@ class _Clip:
             return None
         return cls(tab, start, end, panels)
 
-    def encode(self) -> None:
+    def encode(self, wanted: Callable[[], bool] = lambda: True) -> None:
         """Every panel's clip: from the cache, else encoded (in parallel: the encoder and the JPEG
-        decoder release the GIL) and cached."""
+        decoder release the GIL) and cached. Stops (:class:`ClipNotWanted`) once ``wanted`` says
+        no: a paused playback or a closed tab leaves nothing encoding for it."""
         self.uris = {panel: uri for panel in self.panels if (uri := self._cache.get(self._keys[panel])) is not None}
         todo = {panel: uris for panel, uris in self.panels.items() if panel not in self.uris}
         if todo:
             with ThreadPoolExecutor(max_workers=len(todo), thread_name_prefix="inspector-clip") as pool:
-                futures = {panel: pool.submit(encode_clip, uris, self.fps) for panel, uris in todo.items()}
+                futures = {panel: pool.submit(encode_clip, uris, self.fps, wanted) for panel, uris in todo.items()}
                 for panel, future in futures.items():
                     self.uris[panel] = future.result()
                     self._cache.put(self._keys[panel], self.uris[panel])
