@@ -462,7 +462,9 @@ def test_the_camera_is_fitted_to_the_canvas_the_page_has(browser, app):
     again on a resize, but a camera the user has moved stays where the user put it."""
     import numpy as np
 
-    page, tab = new_page(browser, app, full_resolution=True)  # the canvas's size in pixels is the point
+    # The canvas's shape is the point, not its pixels: drawn at the tests' pixel ratio (a quarter
+    # of the pixels to draw in software), its width and height scale alike.
+    page, tab = new_page(browser, app)
     open_in_page(page, tab, app, LONG)
     camera = tab.client.camera
 
@@ -471,13 +473,14 @@ def test_the_camera_is_fitted_to_the_canvas_the_page_has(browser, app):
         return tab.scene.framed_aspect is not None and abs(tab.scene.framed_aspect - aspect) < 0.02 * aspect
 
     wait_until(fitted_to_canvas, what="the view fitted to the docked canvas")
-    page.set_viewport_size({"width": 1200, "height": 1000})
-    wait_until(lambda: camera.image_width < 400 and fitted_to_canvas(), what="the view fitted after a resize")
+    wide = camera.image_width
+    page.set_viewport_size({"width": 1200, "height": 1000})  # the panels leave the canvas half its width
+    wait_until(lambda: camera.image_width < 0.6 * wide and fitted_to_canvas(), what="the view fitted after a resize")
     moved = tuple(np.asarray(camera.position) + [0.3, 0.0, 0.1])  # as if the user orbited away
     camera.position = moved
     wait_until(lambda: np.allclose(camera.position, moved, atol=1e-4), what="the page to take the camera")
     page.set_viewport_size({"width": 1600, "height": 1000})
-    wait_until(lambda: camera.image_width > 400, what="the canvas to grow back")
+    wait_until(lambda: camera.image_width > 0.9 * wide, what="the canvas to grow back")
     page.wait_for_timeout(2000)
     np.testing.assert_allclose(camera.position, moved, atol=1e-4)
     page.close()
