@@ -10,6 +10,7 @@ went with it. Addresses that lead nowhere are refused in seconds without Ray.
 from __future__ import annotations
 
 import contextlib
+import io
 import json
 import os
 import shutil
@@ -177,6 +178,16 @@ def test_a_head_that_wants_a_token_is_one_line_without_one(demo_reports):
         "the cluster's token in RAY_AUTH_TOKEN, RAY_AUTH_TOKEN_PATH or ~/.ray/auth_token\n")
 
 
+@pytest.mark.parametrize("command", ["report", "export"])
+def test_ray_without_an_address_is_a_local_instance(command):
+    """``--ray`` alone asks for the local instance (what :func:`local_ray` starts, as the commands do)."""
+    from inspector.cli import build_parser
+
+    out = ["-o", "out"] if command == "export" else []
+    assert build_parser().parse_args([command, str(DEMO), "--ray", *out]).ray == "local"
+    assert build_parser().parse_args([command, str(DEMO), *out]).ray is None
+
+
 def test_unreachable_cluster_is_one_line(tmp_path):
     start = time.monotonic()
     out = inspector("report", DEMO, "--ray", "ray://127.0.0.1:1", cache_dir=tmp_path / "cache")
@@ -252,9 +263,13 @@ def test_bundles_cover_every_rollout_once_and_are_not_tiny():
 
 @pytest.fixture(scope="module")
 def local_ray():
+    """A local instance of 2 CPUs started as ``--ray`` without an address starts one (saying so
+    in one line), stopped at the module's end with every process of Ray's gone."""
     before = ray_processes()
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
-    with ray_workers("local", 2) as workers:
+    said = io.StringIO()
+    with contextlib.redirect_stderr(said), ray_workers("local", 2) as workers:
+        assert "inspector: Ray at local, 2 CPU(s)" in said.getvalue()
         assert workers.cpus == 2
         started = ray_processes() - before
         assert started, "no raylet or gcs_server started"
