@@ -43,7 +43,7 @@ from typing import Any
 
 from ._files import mkstemp_sibling
 from .errors import one_line
-from .schema import mismatch
+from .schema import json_text, mismatch
 
 ENV_DIR = "INSPECTOR_CACHE_DIR"
 # The app's in-memory frame cache (JPEGs sent to browsers, shared by every tab) [MiB].
@@ -56,7 +56,7 @@ IMPORTED_FROM = ".inspector-imported-from.json"
 # The modules whose code decides what an import derives from its source.
 _IMPORT_MODULES = ("data/importers/__init__.py", "data/importers/calibration.py",
                    "data/importers/dreamzero_offline.py", "data/importers/dreamzero_served.py",
-                   "data/importers/dreamzero_so101.py",
+                   "data/importers/dreamzero_so101.py", "data/importers/dreamzero_so101_summaries.py",
                    "data/importers/groot_dreams.py", "data/importers/lerobot_eval.py", "data/session.py")
 _METRIC_MODULES = ("analysis/metrics.py", "analysis/sweep.py", "analysis/video_metrics.py", "analysis/timeline.py",
                    "analysis/video_action.py",
@@ -140,8 +140,8 @@ def record_import_sources(session, source: str | Path, dataset: str | Path | Non
     """Write into ``session`` (:class:`inspector.data.session.Session`), just imported in memory
     from ``source``, what keys its rollouts' cache entries (:func:`rollout_key`): per rollout, the
     state (path, size, modification time) of every file of its source directory
-    (``extra.source.path``, when that is a directory under ``source``), else of every file under
-    ``source``; with ``source``, ``dataset`` and the importers' code."""
+    (``extra.source.path``, when that is a directory under ``source``, and ``extra.source.also_read``),
+    else of every file under ``source``; with ``source``, ``dataset`` and the importers' code."""
     source = Path(source).resolve()
     whole: list[list[Any]] | None = None
     states = {}
@@ -149,14 +149,17 @@ def record_import_sources(session, source: str | Path, dataset: str | Path | Non
         own = rollout.extra.get("source") if isinstance(rollout.extra, dict) else None
         where = Path(own["path"]).resolve() if isinstance(own, dict) and isinstance(own.get("path"), str) else None
         if where is not None and where.is_dir() and where.is_relative_to(source):
-            files = _tree_state(where)
+            # and the files beside it that the import also read (a list of samples lending its episode)
+            also = own.get("also_read") if isinstance(own, dict) else None
+            files = _tree_state(where) + [_file_state(Path(p)) for p in (also if isinstance(also, list) else [])
+                                          if isinstance(p, str)]
         else:
             whole = _tree_state(source) if whole is None else whole
             files = whole
         state = {"code": code_fingerprint(_IMPORT_MODULES), "source": str(source),
                  "dataset": None if dataset is None else str(dataset), "files": files}
         states[tag] = hashlib.sha256(json.dumps(state, sort_keys=True).encode()).hexdigest()
-    data = json.dumps({"schema": SCHEMA, "rollouts": states}).encode()
+    data = json_text({"schema": SCHEMA, "rollouts": states}).encode()
     try:
         (Path(session.root) / IMPORTED_FROM).write_bytes(data)
     except OSError:  # the cache is optional: without the record (or with a cut one, not JSON), its
@@ -250,8 +253,8 @@ class MetricsCache:
 def encode_entry(key: str, record: dict[str, Any]) -> bytes:
     """An entry file's bytes: a header line (schema, key, SHA-256 of the rest), then the record."""
     # dumps, not dump: dump streams through the pure-Python encoder (5x slower)
-    body = json.dumps(record, allow_nan=False).encode()
-    header = json.dumps({"schema": SCHEMA, "key": key, "sha256": hashlib.sha256(body).hexdigest()})
+    body = json_text(record).encode()
+    header = json_text({"schema": SCHEMA, "key": key, "sha256": hashlib.sha256(body).hexdigest()})
     return header.encode() + b"\n" + body
 
 

@@ -31,8 +31,7 @@ it ends).
 from __future__ import annotations
 
 import argparse
-import json
-import math
+import contextlib
 import os
 import re
 import signal
@@ -43,13 +42,21 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
+from . import _flag_values as flag
+from ._signals import clear_stop_request, note_stop_request
 from .cache import DEFAULT_FRAME_CACHE_MB
 from .errors import InspectorError
+from .schema import json_text
 from .units import DEFAULT_LIMIT_MARGIN_DEG
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 128 + signal.SIGINT
 EXIT_TERMINATED = 128 + signal.SIGTERM
+# Flags' upper bounds (docs/reliability.md): past them a value is no one's intent and costs memory or
+# time in proportion (2,000 bootstrap replicates take seconds; a billion, 15 GB).
+MAX_BOOTSTRAP = 20_000
+MAX_JOBS = 1_000_000  # beyond the cores, --jobs is capped with a note anyway
+MAX_CACHE_MB = 1 << 20  # 1 TiB of frames
 
 
 # Each command imports what it runs when it runs: `inspector info` must not pay for rerun, viser or
@@ -101,7 +108,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
     from .data.info import describe, format_info
 
     info = describe(Path(args.path), calibration=args.calibration)
-    _emit(json.dumps(info, indent=2) if args.json else format_info(info))
+    _emit(json_text(info, indent=2) if args.json else format_info(info))
     return 0
 
 
@@ -148,7 +155,9 @@ def _cmd_report(args: argparse.Namespace) -> int:
         from .report.html import write_report_html
 
         print(f"wrote {write_report_html(report, args.html, sources=args.paths)}", file=sys.stderr)
-    _emit(json.dumps(report, indent=2) if args.json else format_report(report))
+        if not (args.json or args.text):  # the page is what was asked for: the tables only on request
+            return 0
+    _emit(json_text(report, indent=2) if args.json else format_report(report))
     return 0
 
 
@@ -158,7 +167,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     comparison = build_comparison(args.a, args.b, dataset=args.dataset, jobs=args.jobs,
                                   use_cache=not args.no_cache, limit_margin_deg=args.limit_margin,
                                   outcome_source=args.outcome_source, measures=_measures(args))
-    _emit(json.dumps(comparison, indent=2) if args.json else format_comparison(comparison))
+    _emit(json_text(comparison, indent=2) if args.json else format_comparison(comparison))
     return 0
 
 
@@ -168,6 +177,9 @@ def _cmd_outcomes_import(args: argparse.Namespace) -> int:
     done = import_outcomes(args.file, args.path, add_tags=args.add_tag or ())
     for row in done.unmatched:
         print(f"warning: {args.file}: line {row.line}: {row.names()} matches no rollout", file=sys.stderr)
+    if done.unmatched_rows > len(done.unmatched):
+        print(f"warning: {args.file}: {done.unmatched_rows - len(done.unmatched):,} more row(s) match no rollout",
+              file=sys.stderr)
     print(f"imported {done.rows} row(s) of {args.file} as the outcomes of {done.rollouts} rollout(s) into {done.store}")
     return 0
 
@@ -183,6 +195,11 @@ def _cmd_serve(args: argparse.Namespace) -> int:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
+    import importlib.util
+
+    if importlib.util.find_spec("rerun") is None:
+        raise InspectorError("inspector export", "needs the Rerun SDK: pip install 'inspector[export]' "
+                                                 "(pip install -e '.[export]' in a clone)")
     from .export.command import export_cli
 
     return export_cli(args.path, args.output, rollout=args.rollout, views=args.views,
@@ -220,7 +237,7 @@ def _cmd_rank(args: argparse.Namespace) -> int:
         from .report.decision_html import write_ranking_html
 
         print(f"wrote {write_ranking_html(result, args.html)}", file=sys.stderr)
-    _emit(json.dumps(result, indent=2) if args.json else format_ranking(result))
+    _emit(json_text(result, indent=2) if args.json else format_ranking(result))
     return 0
 
 
@@ -234,17 +251,31 @@ def _cmd_agreement(args: argparse.Namespace) -> int:
         from .report.decision_html import write_agreement_html
 
         print(f"wrote {write_agreement_html(result, args.html)}", file=sys.stderr)
-    _emit(json.dumps(result, indent=2) if args.json else format_agreement(result))
+    _emit(json_text(result, indent=2) if args.json else format_agreement(result))
+    return 0
+
+
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from .analysis.calibrate_command import calibrate, format_calibration
+
+    result = calibrate(args.path, args.view, args.points, rollout=args.rollout, fovy_guess_deg=args.fov,
+                       max_error_px=args.max_error, fit_principal_point=args.fit_principal_point)
+    _emit(json_text(result, indent=2) if args.json else format_calibration(result))
     return 0
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from .demo import rebuild_demo
+    from .demo import rebuild_demo, write_checkpoints
 
-    if not args.rebuild:
-        print("use --rebuild to regenerate the demo session (inspector serve opens it)")
+    if args.checkpoints:
+        write_checkpoints(Path(args.out or "."), overwrite=args.overwrite)
         return 0
-    rebuild_demo(Path(args.out) if args.out else None, quick=args.quick)
+    if not args.rebuild:
+        print("use --rebuild to regenerate the demo session (inspector serve opens it), or --checkpoints "
+              "for the sessions the README's workflows use")
+        return 0
+    # flushed per line: a rebuild takes minutes, and a pipe (CI, tee) would hold every line to the end
+    rebuild_demo(Path(args.out) if args.out else None, quick=args.quick, log=lambda line: print(line, flush=True))
     return 0
 
 
@@ -268,87 +299,10 @@ class _OneLineParser(argparse.ArgumentParser):
         sys.exit(EXIT_BAD_INPUT)
 
 
-def _number(text: str, kind: type[int] | type[float]) -> float:
-    try:
-        value = kind(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a {'whole ' if kind is int else ''}number (got {text!r})") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be a finite number (got {text})")
-    return value
-
-
-def _whole_number_at_least(minimum: int) -> Callable[[str], int]:
-    """An argparse type: a whole number >= ``minimum``."""
-    def parse(text: str) -> int:
-        value = int(_number(text, int))
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"must be at least {minimum} (got {value})")
-        return value
-    return parse
-
-
-_positive_int = _whole_number_at_least(1)  # --jobs
-_index = _whole_number_at_least(0)  # --episode
-
-
-def _positive_float(text: str) -> float:
-    value = _number(text, float)
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"must be more than 0 (got {text})")
-    return value
-
-
-def _port(text: str) -> int:
-    value = int(_number(text, int))
-    if not 0 <= value <= 65535:
-        raise argparse.ArgumentTypeError(f"must be a TCP port from 0 to 65535 (got {value}; 0 picks a free one)")
-    return value
-
-
-def _index_list(text: str) -> list[int]:
-    """``0,3,10-20`` -> [0, 3, 10, 11, ..., 20] (an argparse type)."""
-    out: list[int] = []
-    for part in text.split(","):
-        match = re.fullmatch(r"\s*(\d+)\s*(?:-\s*(\d+)\s*)?", part)
-        if not match or (match[2] is not None and int(match[2]) < int(match[1])):
-            raise argparse.ArgumentTypeError(f"expected indexes like 0,3,10-20 (got {text!r})")
-        first = int(match[1])
-        last = first if match[2] is None else int(match[2])
-        if last - first > 1_000_000:
-            raise argparse.ArgumentTypeError(f"a range of more than a million indexes (got {part!r})")
-        out += range(first, last + 1)
-    return sorted(set(out))
-
-
-def _key_value(what: str) -> Callable[[str], tuple[str, str]]:
-    """An argparse type: ``KEY=VALUE``, both non-empty."""
-    def parse(text: str) -> tuple[str, str]:
-        key, sep, value = text.partition("=")
-        if not sep or not key.strip() or not value.strip():
-            raise argparse.ArgumentTypeError(f"expected {what} (got {text!r})")
-        return key.strip(), value.strip()
-    return parse
-
-
-def _margin(text: str) -> float:
-    value = _number(text, float)
-    if not (0.0 <= value < 360.0):
-        raise argparse.ArgumentTypeError(f"must be a number of degrees in [0, 360) (got {text})")
-    return value
-
-
 def _limit_margin_argument(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--limit-margin", type=_margin, default=DEFAULT_LIMIT_MARGIN_DEG, metavar="DEG",
+    p.add_argument("--limit-margin", type=flag.margin_deg, default=DEFAULT_LIMIT_MARGIN_DEG, metavar="DEG",
                    help="a joint counts as past its URDF limit only beyond this margin "
                         f"(default {DEFAULT_LIMIT_MARGIN_DEG:g} deg)")
-
-
-def _non_negative_float(text: str) -> float:
-    value = _number(text, float)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be 0 or more (got {text})")
-    return value
 
 
 def _measure_arguments(p: argparse.ArgumentParser) -> None:
@@ -356,17 +310,17 @@ def _measure_arguments(p: argparse.ArgumentParser) -> None:
     from .analysis.measure_settings import DEFAULT_MEASURES as d
 
     g = p.add_argument_group("sanity measures", "tolerances of completion and of the chunk-seam flag")
-    g.add_argument("--completion-tol-deg", type=_non_negative_float, default=d.completion_tol_deg, metavar="DEG",
+    g.add_argument("--completion-tol-deg", type=flag.non_negative(1000.0), default=d.completion_tol_deg, metavar="DEG",
                    help="completion: joints within this of the GT's final pose, 6-joint norm in the data's "
                         f"units (default {d.completion_tol_deg:g})")
-    g.add_argument("--completion-tol-mm", type=_non_negative_float, default=d.completion_tol_mm, metavar="MM",
+    g.add_argument("--completion-tol-mm", type=flag.non_negative(10_000.0), default=d.completion_tol_mm, metavar="MM",
                    help=f"completion: the tool point within this of the final pose's (default {d.completion_tol_mm:g} mm)")
-    g.add_argument("--completion-hold-s", type=_non_negative_float, default=d.completion_hold_s, metavar="S",
+    g.add_argument("--completion-hold-s", type=flag.non_negative(86_400.0), default=d.completion_hold_s, metavar="S",
                    help=f"completion: staying there this long (default {d.completion_hold_s:g} s)")
-    g.add_argument("--seam-multiple", type=_non_negative_float, default=d.seam_multiple, metavar="X",
+    g.add_argument("--seam-multiple", type=flag.non_negative(1000.0), default=d.seam_multiple, metavar="X",
                    help="a chunk seam is flagged when its jump exceeds this multiple of the GT's typical "
                         f"(95th percentile) step (default {d.seam_multiple:g}) ...")
-    g.add_argument("--seam-floor", type=_non_negative_float, default=d.seam_floor_deg, metavar="DEG",
+    g.add_argument("--seam-floor", type=flag.non_negative(1000.0), default=d.seam_floor_deg, metavar="DEG",
                    help=f"... and this floor, in the data's units (default {d.seam_floor_deg:g})")
 
 
@@ -381,9 +335,9 @@ def _decision_arguments(p: argparse.ArgumentParser) -> None:
     """What ``rank`` and ``agreement`` share: output forms and the bootstrap."""
     p.add_argument("--json", action="store_true")
     p.add_argument("--html", metavar="OUT.html", help="also write one self-contained page with the figure")
-    p.add_argument("--bootstrap", type=_whole_number_at_least(100), default=2000, metavar="N",
-                   help="bootstrap replicates for the 95%% intervals (default 2000)")
-    p.add_argument("--seed", type=_index, default=0, help="the bootstrap's random seed (default 0)")
+    p.add_argument("--bootstrap", type=flag.whole(100, MAX_BOOTSTRAP), default=2000, metavar="N",
+                   help=f"bootstrap replicates for the 95%% intervals (default 2000, at most {MAX_BOOTSTRAP})")
+    p.add_argument("--seed", type=flag.index, default=0, help="the bootstrap's random seed (default 0)")
 
 
 def _calibration(text: str) -> str:
@@ -471,18 +425,18 @@ def _served_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("--views", help=f"tile layout: a preset ({', '.join(served.GRIDS)}) or rows by ';', cells "
                                    "by ',', '-' unused (default: so101 for 640x352 frames, else droid)")
-    p.add_argument("--frames-per-call", type=_whole_number_at_least(1), default=served.FRAMES_PER_CALL,
+    p.add_argument("--frames-per-call", type=flag.whole(1, 1000), default=served.FRAMES_PER_CALL,
                    help=f"imagined frames each inference call adds (default {served.FRAMES_PER_CALL})")
-    p.add_argument("--open-loop-horizon", type=_whole_number_at_least(1), default=served.EXECUTED_PER_CALL,
+    p.add_argument("--open-loop-horizon", type=flag.whole(1, 4096), default=served.EXECUTED_PER_CALL,
                    help=f"actions the client executes per call (default {served.EXECUTED_PER_CALL})")
-    p.add_argument("--steps-per-frame", type=_positive_float, default=served.STEPS_PER_FRAME,
+    p.add_argument("--steps-per-frame", type=flag.Bounded(float, 0.1, 1000.0), default=served.STEPS_PER_FRAME,
                    help=f"control steps between imagined frames (default {served.STEPS_PER_FRAME})")
-    p.add_argument("--control-hz", type=_positive_float,
+    p.add_argument("--control-hz", type=flag.rate_hz(),
                    help=f"control rate [Hz] (default: the recording's fps, else {served.CONTROL_HZ:g})")
     rec = p.add_mutually_exclusive_group()
     rec.add_argument("--dataset", help="LeRobot dataset recorded while the policy ran (the GT)")
     rec.add_argument("--recording", help="the client's episode_N.mp4, or the run_sim_eval.py directory of them")
-    p.add_argument("--episode", type=_index, help="episode of the first served video (default 0; the k-th "
+    p.add_argument("--episode", type=flag.index, help="episode of the first served video (default 0; the k-th "
                                                    "pairs with episode + k)")
 
 
@@ -498,16 +452,16 @@ def build_parser() -> argparse.ArgumentParser:
     dz = _import_parser(fmt, "dreamzero-so101", "DreamZero-SO101 evaluation directories",
                         "a rollout directory or a parent of several (searched recursively)", _cmd_import)
     dz.add_argument("--dataset", help="LeRobot dataset (root or org/name in the HF cache) with the GT episode")
-    dz.add_argument("--episode", type=_index, help="GT episode index (default: the rollout's own)")
+    dz.add_argument("--episode", type=flag.index, help="GT episode index (default: the rollout's own)")
     gd = _import_parser(fmt, "groot-dreams", "a GR00T-Dreams (DreamGen) IDM_dump output: neural trajectories",
                         "the dump's directory (meta/, data/, videos/)", _cmd_import)
     _calibration_argument(gd)
     off = _import_parser(fmt, "dreamzero-offline", "DreamZero-SO101 offline_inference.py runs (predicted_actions.csv)",
                          "a run directory or a parent of several (searched recursively)", _cmd_import_offline)
     off.add_argument("--dataset", help="LeRobot dataset with the GT episode (default: the runs' inspector_gt.json)")
-    off.add_argument("--episode", type=_index, help="GT episode index (default: inspector_gt.json's)")
-    off.add_argument("--start-frame", type=_index, help="episode frame the run started at (default: inspector_gt.json's, else 0)")
-    off.add_argument("--fps", type=_positive_float, help="action rate [Hz] (default: the dataset's, else 30)")
+    off.add_argument("--episode", type=flag.index, help="GT episode index (default: inspector_gt.json's)")
+    off.add_argument("--start-frame", type=flag.index, help="episode frame the run started at (default: inspector_gt.json's, else 0)")
+    off.add_argument("--fps", type=flag.rate_hz(), help="action rate [Hz] (default: the dataset's, else 30)")
     _import_parser(fmt, "lerobot-eval", "a lerobot-eval output directory (eval_info.json, videos/, recordings/)",
                    "the evaluation's output directory", _cmd_import_eval)
     _served_arguments(_import_parser(
@@ -525,13 +479,15 @@ def build_parser() -> argparse.ArgumentParser:
                                              "datasets (a directory or org/name in the local cache)")
     p.add_argument("--json", action="store_true")
     p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
-    p.add_argument("--jobs", "-j", type=_positive_int, default=None,
+    p.add_argument("--jobs", "-j", type=flag.whole(1, MAX_JOBS), default=None,
                    help="worker processes (default: one per core; 1 computes in this process); with "
                         "--ray, the local Ray instance's CPUs or a cluster's tasks at once")
     p.add_argument("--no-cache", action="store_true",
                    help="neither read nor write the metrics cache ($INSPECTOR_CACHE_DIR, else ~/.cache/inspector)")
     p.add_argument("--html", metavar="OUT.html",
-                   help="also write one self-contained page (tables, figures; opens offline)")
+                   help="write one self-contained page (tables, figures; opens offline) instead of printing "
+                        "the tables (--json or --text prints them too)")
+    p.add_argument("--text", action="store_true", help="with --html, print the text tables as well")
     p.add_argument("--sanity", action="store_true",
                    help="add the verdict of the five sanity tests (chunk fidelity, latent stability, joint "
                         "coherence, multi-task disambiguation, autoregressive rollout)")
@@ -549,7 +505,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("b", help="the same for B; deltas are B - A")
     p.add_argument("--json", action="store_true")
     p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
-    p.add_argument("--jobs", "-j", type=_positive_int, default=None,
+    p.add_argument("--jobs", "-j", type=flag.whole(1, MAX_JOBS), default=None,
                    help="worker processes (default: one per core; 1 computes in this process)")
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the metrics cache")
     _limit_margin_argument(p)
@@ -570,10 +526,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("paths", nargs="*", help="sessions, rollouts, DreamZero-SO101 source dirs or LeRobot "
                                             "datasets (a directory or org/name in the local cache)")
     p.add_argument("--host", default="127.0.0.1", help="interface to bind (default loopback only)")
-    p.add_argument("--port", type=_port, default=8080, help="TCP port (default 8080; 0 picks a free one)")
+    p.add_argument("--port", type=flag.port, default=8080, help="TCP port (default 8080; 0 picks a free one)")
     p.add_argument("--share", action="store_true", help="also open a public viser share link")
     p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
-    p.add_argument("--cache-mb", type=_positive_float, default=DEFAULT_FRAME_CACHE_MB, metavar="MB",
+    p.add_argument("--cache-mb", type=flag.positive(MAX_CACHE_MB), default=DEFAULT_FRAME_CACHE_MB, metavar="MB",
                    help="memory for video frames sent to browsers, shared by all tabs "
                         f"(default {DEFAULT_FRAME_CACHE_MB})")
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the metrics cache")
@@ -591,11 +547,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", default=".",
                    help=".rrd file (or directory for several rollouts; default: the current directory)")
     p.add_argument("--rollout", help="tag of the rollout to export (default: all)")
-    p.add_argument("--episode", type=_index, action="append", metavar="N",
+    p.add_argument("--episode", type=flag.index, action="append", metavar="N",
                    help="a LeRobot dataset's episode to export (repeat for several)")
     p.add_argument("--views", nargs="*", help="camera views to include (default: all)")
     p.add_argument("--dataset", help="LeRobot dataset with the GT episodes")
-    p.add_argument("--jobs", "-j", type=_positive_int, default=None,
+    p.add_argument("--jobs", "-j", type=flag.whole(1, MAX_JOBS), default=None,
                    help="worker processes writing several recordings (default: one per core)")
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the metrics cache")
     _ray_argument(p, "write the recordings")
@@ -610,28 +566,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("server", help="the policy server: ws://HOST:PORT or HOST:PORT")
     p.add_argument("dataset", help="LeRobot dataset (a directory or org/name in the local cache)")
     p.add_argument("-o", "--output", required=True, help="session directory to write")
-    p.add_argument("--episodes", type=_index_list, metavar="LIST", help="episodes, e.g. 0,3,10-20 (default: all)")
+    p.add_argument("--episodes", type=flag.index_list, metavar="LIST", help="episodes, e.g. 0,3,10-20 (default: all)")
     how = p.add_mutually_exclusive_group()
-    how.add_argument("--samples", type=_positive_int, metavar="N",
+    how.add_argument("--samples", type=flag.whole(1, 100_000), metavar="N",
                      help="N start frames evenly spaced in each episode (default 8)")
-    how.add_argument("--frames", type=_index_list, metavar="LIST", help="these start frames in each episode")
+    how.add_argument("--frames", type=flag.index_list, metavar="LIST", help="these start frames in each episode")
     how.add_argument("--every-chunk", action="store_true",
                      help="an open-loop replay of each episode: a chunk every --executed-per-chunk frames, each "
                           "from the real observation there, stored as one rollout (kind open_loop_replay)")
-    p.add_argument("--camera", type=_key_value("KEY=NAME"), action="append", metavar="KEY=NAME",
+    p.add_argument("--camera", type=flag.key_value("KEY=NAME"), action="append", metavar="KEY=NAME",
                    help="send dataset camera NAME under server key KEY (observation/KEY when KEY has no /); repeat")
     p.add_argument("--prompt", help="the prompt for every sample (default: each episode's task)")
-    p.add_argument("--timeout", type=_positive_float, default=300.0, metavar="S",
+    p.add_argument("--timeout", type=flag.positive(86_400.0), default=300.0, metavar="S",
                    help="longest wait for the connection and for each reply [s] (default 300)")
     p.add_argument("--resume", action="store_true", help="continue the session at -o: skip the samples it holds")
-    p.add_argument("--executed-per-chunk", type=_positive_int, default=9, metavar="N",
+    p.add_argument("--executed-per-chunk", type=flag.whole(1, 4096), default=9, metavar="N",
                    help="steps a chunk runs before the next (--every-chunk) and that its predicted frames span "
                         "(default 9)")
-    p.add_argument("--video", type=_key_value("KEY=VIEW"), action="append", metavar="KEY=VIEW",
+    p.add_argument("--video", type=flag.key_value("KEY=VIEW"), action="append", metavar="KEY=VIEW",
                    help="keep the reply's predicted frames under KEY as view VIEW (default: video=<first camera>)")
     p.add_argument("--model", help="the model's name in the session (default: the server address)")
     p.add_argument("--checkpoint", help="the checkpoint's name in the session")
-    p.add_argument("--max-reply-mb", type=_positive_float, default=128.0, metavar="MB",
+    p.add_argument("--max-reply-mb", type=flag.positive(4096.0), default=128.0, metavar="MB",
                    help="refuse a reply (or handshake) larger than MB megabytes, unread: that sample fails "
                         "(default 128: 80 times DreamZero-SO101's reply with its predicted video)")
     p.set_defaults(func=_cmd_eval)
@@ -649,7 +605,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sessions of the same checkpoints and tasks on the robot or in a simulator")
     p.add_argument("--by", choices=("success", "progress"), default="success",
                    help="compare success rates (default) or mean progress")
-    p.add_argument("--match", type=_key_value("IMAGINED=REAL"), action="append", metavar="IMAGINED=REAL",
+    p.add_argument("--match", type=flag.key_value("IMAGINED=REAL"), action="append", metavar="IMAGINED=REAL",
                    help="an imagined checkpoint's name as the real side calls it; repeat")
     for side in ("imagined", "real"):
         p.add_argument(f"--{side}-source", choices=("label", "file", "sim", "recording"), default=None,
@@ -658,9 +614,39 @@ def build_parser() -> argparse.ArgumentParser:
     _decision_arguments(p)
     p.set_defaults(func=_cmd_agreement)
 
-    p = sub.add_parser("demo", help="rebuild the bundled demo session")
-    p.add_argument("--rebuild", action="store_true")
-    p.add_argument("--out", help="output directory (default: sessions/demo)")
+    p = sub.add_parser("calibrate", help="a fixed view's camera from clicked points of the arm in GT frames",
+                       description="Solves the camera of VIEW (intrinsics and pose in the arm's base frame) from "
+                                   "points of the arm clicked in GT frames: the origin of a URDF link or "
+                                   "gripper_tip at a step of a rollout's GT episode, and its pixel. RANSAC "
+                                   "leaves bad clicks out; the camera goes into the session's cameras.json "
+                                   "(docs/formats.md#camerasjson).")
+    p.add_argument("path", metavar="PATH", help="a session, one rollout of it, or a raw directory")
+    p.add_argument("--view", required=True, help="the camera view the points were clicked in (e.g. front)")
+    p.add_argument("--points", metavar="FILE",
+                   help='{"view": V, "points": [{"step": S, "point": NAME, "u": U, "v": V}, ...]} '
+                        "(default: the clicks saved in the session for VIEW)")
+    p.add_argument("--rollout", metavar="TAG", help="the rollout whose GT episode the steps are of "
+                                                    "(where the points file does not say; default: the only one)")
+    p.add_argument("--fov", type=flag.Bounded(float, 1.0, 179.0, words="a field of view from 1 to 179 degrees"),
+                   default=55.0, metavar="DEG", help="vertical field of view to start from (default 55)")
+    p.add_argument("--max-error", type=flag.positive(1000.0), default=5.0, metavar="PX",
+                   help="refuse a camera whose RMS reprojection error is above PX (default 5); points past "
+                        "twice it are left out as bad clicks")
+    p.add_argument("--fit-principal-point", action="store_true",
+                   help="fit the principal point too (default: the image centre)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.set_defaults(func=_cmd_calibrate)
+
+    p = sub.add_parser("demo", help="rebuild the bundled demo session, or write checkpoint-like sessions from it",
+                       description="--rebuild renders the demo again with MuJoCo offscreen (needs the demo extra "
+                                   "and Debian's libosmesa6; 10-15 min of CPU, a progress bar with an estimate). "
+                                   "--checkpoints writes sessions/step-{56000,64000,72000}, robot/step-*, "
+                                   "judge.jsonl from the demo (a few seconds): docs/development.md#the-demo-session")
+    p.add_argument("--rebuild", action="store_true", help="render the demo session again (MuJoCo, offscreen)")
+    p.add_argument("--checkpoints", action="store_true",
+                   help="write three checkpoint-like sessions, their robot-side twins and a judge file")
+    p.add_argument("--overwrite", action="store_true", help="--checkpoints: replace what an earlier run wrote")
+    p.add_argument("--out", help="output directory (--rebuild: default sessions/demo; --checkpoints: default .)")
     p.add_argument("--quick", action="store_true", help="a tiny version (a few frames), for tests")
     p.set_defaults(func=_cmd_demo)
     return parser
@@ -679,8 +665,10 @@ def _sigterm_as_interrupt() -> Callable[[], None]:
         return lambda: None
 
     def terminated(signum, frame):
+        note_stop_request()  # kept even where the raise below lands in a callback that ignores it
         raise Terminated
 
+    clear_stop_request()
     previous = signal.signal(signal.SIGTERM, terminated)
 
     def restore() -> None:
@@ -711,5 +699,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         restore_sigterm()
 
 
+def run() -> None:
+    """The ``inspector`` command: :func:`main`, then out of the process.
+
+    A command stopped by a signal ends at once, after its own clean-up (the ``finally`` blocks the
+    interrupt unwound), without the interpreter's exit: the signal may have landed in an import,
+    leaving that module's lock held for good, and the exit joins every worker thread (the app
+    loads the arm's meshes in one) — a thread waiting on that lock would hold the process forever.
+    """
+    code = main()
+    if code in (EXIT_TERMINATED, EXIT_INTERRUPTED):
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    run()

@@ -24,11 +24,18 @@ no limit (``2**70``, ``10**400``), and one past what numpy, a float or an alloca
 traceback (``OverflowError``) or an allocation far from where it was read. Every integer is
 checked against a bound (:data:`MAX_WHOLE` unless the field has a smaller one), every number is
 checked finite without converting an integer to a float first.
+
+JSON the project writes (every command's ``--json``, ``session.json``, ``rollout.json``, outcome and
+vote files, cache entries) goes through :func:`json_text`: strict JSON (RFC 8259), which has no
+``NaN`` or ``Infinity`` (Python's ``json`` writes both as bare tokens that Node, ``jq`` and most
+parsers reject). What is not measured is ``null``; a non-finite number that reaches the writer is
+a measure that ran on what was not there, so it is refused naming where it sits, never printed.
 """
 
 from __future__ import annotations
 
 import functools
+import json
 import math
 import types
 from collections.abc import Callable, Sequence
@@ -263,3 +270,41 @@ def finite_number(value: Any, file: str | Path, field: str, minimum: float = -ma
         raise InspectorError(file, f"{field}: {problem}")
     return float(value)
 
+
+
+# ----------------------------------------------------------------------------------------------
+# JSON written
+
+
+class NotJsonError(ValueError):
+    """A value that strict JSON cannot hold (NaN, an infinity) reached :func:`json_text`: a bug in
+    the code that built the document (a figure not measured is None), named by where it sits."""
+
+
+def json_text(value: Any, indent: int | None = None, sort_keys: bool = False) -> str:
+    """``value`` as strict JSON text: ``allow_nan=False``, the one place the project writes JSON.
+
+    Raises:
+        NotJsonError: a non-finite float in ``value``, naming its place (``rollouts[3].seams.worst``).
+    """
+    try:
+        return json.dumps(value, indent=indent, sort_keys=sort_keys, allow_nan=False)
+    except ValueError:
+        where = _non_finite_place(value, "")
+        if where is None:
+            raise
+        raise NotJsonError(f"{where or 'the document'}: a non-finite number is not JSON "
+                           "(what is not measured is null)") from None
+
+
+def _non_finite_place(value: Any, where: str) -> str | None:
+    """Where the first non-finite float in ``value`` sits, or None (only run once writing failed)."""
+    if isinstance(value, float):
+        return None if math.isfinite(value) else where
+    if isinstance(value, dict):
+        return next((w for k, v in value.items() if (w := _non_finite_place(v, _join(where, str(k)))) is not None),
+                    None)
+    if isinstance(value, (list, tuple)):
+        return next((w for i, v in enumerate(value) if (w := _non_finite_place(v, f"{where}[{i}]")) is not None),
+                    None)
+    return None

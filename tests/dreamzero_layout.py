@@ -25,6 +25,9 @@ Layout written (names as the real outputs have them)::
                                 (9 frames)
     demo/train_ep0/             single_f000 as a mosaic sample: predicted_video.mp4 (2x2
                                 [front|top; gripper|black], top black), gt_future.mp4 (front)
+
+``write_aggregate`` adds a ``zeroshot_chunk/aggregate.json`` of the real schema (all samples,
+some without a folder) to a copy of it.
 """
 
 from __future__ import annotations
@@ -116,6 +119,43 @@ def write_dreamzero_layout(dest: Path, demo: Path = DEMO) -> Path:
         "predicted_resolution": [int(mosaic.shape[1]), int(mosaic.shape[2])],
         "actions_pred": pred.tolist(), "actions_gt": gt.tolist()})
     return dest
+
+
+TRAINING_DATASET = "lab/so101-training-mix"  # what the aggregates below say the model was trained on
+ZERO_SHOT_DATASET = "lab/so101_unseen_task"
+
+
+def write_aggregate(chunk_dir: Path, extra_samples: int = 2, seed: int = 0, **top: object) -> dict:
+    """Write ``chunk_dir/aggregate.json`` in the schema of DreamZero-SO101's
+    ``zeroshot_chunk/aggregate.json``: every sample folder's meta.json under ``chunk_dir`` as an
+    entry, then ``extra_samples`` more (``sNNN``: a folder's actions moved by a random offset,
+    with no folder), its figures computed from the entries. ``top`` overrides top-level fields.
+    Returns what was written."""
+    rng = np.random.default_rng(seed)
+    samples = [json.loads((d / "meta.json").read_text()) for d in sorted(chunk_dir.iterdir())
+               if (d / "meta.json").is_file()]
+    for k in range(extra_samples):
+        base = samples[k % len(samples)]
+        pred = np.asarray(base["actions_pred"]) + rng.normal(0, 3, (len(base["actions_pred"]), len(JOINT_NAMES)))
+        frame = base["frame_in_ep"] + 5 + k
+        samples.append({**base, "tag": f"s{frame:03d}", "frame_in_ep": frame, "actions_pred": pred.tolist()})
+    for s in samples:  # the repository's own figures, as its evaluation computes them
+        diff = np.asarray(s["actions_pred"]) - np.asarray(s["actions_gt"])
+        s.update(action_rmse_deg=float(np.sqrt(np.mean(diff ** 2))), action_mse_deg2=float(np.mean(diff ** 2)),
+                 per_joint_rmse=np.sqrt(np.mean(diff ** 2, axis=0)).tolist(),
+                 per_step_mse=np.mean(diff ** 2, axis=1).tolist(), video_psnr_db=18.0 + rng.random())
+    rmse = [s["action_rmse_deg"] for s in samples]
+    data = {"dataset": ZERO_SHOT_DATASET, "episode": 1, "episode_length": 409,
+            "prompt": "Pick the red cube and place it in the bowl", "n_samples": len(samples),
+            "sample_frames": [s["frame_in_ep"] for s in samples],
+            "mean_action_rmse_deg": float(np.mean(rmse)), "median_action_rmse_deg": float(np.median(rmse)),
+            "best_action_rmse_deg": float(np.min(rmse)), "worst_action_rmse_deg": float(np.max(rmse)),
+            "mean_video_psnr_db": float(np.mean([s["video_psnr_db"] for s in samples])),
+            "zero_shot_disclosure": f"Model was finetuned on {TRAINING_DATASET} only. This dataset was NOT in "
+                                    "the training set.",
+            "samples": samples, **top}
+    _write_json(chunk_dir / "aggregate.json", data)
+    return data
 
 
 def _gt_frames(ep, camera: str, start: int) -> np.ndarray:

@@ -120,3 +120,37 @@ def test_the_pair_arms_are_drawn_side_by_side_named_by_side_only(tmp_path):
                               what="the arms and the slider at step 0")
     finally:
         app.stop()
+
+
+@pytest.mark.slow  # three demo copies served, the arm meshes loaded
+def test_a_broken_votes_file_or_a_vanished_rollout_is_a_card_and_the_next_pair_comes(tmp_path):
+    """A session whose votes.json does not parse takes no part (its file named, never overwritten);
+    a pair whose rollout's files vanished after the start is set aside (its file named); the tab
+    still gets a pair, and votes on the others are saved."""
+    from demo_copies import demo_copy
+
+    tags = ("single_f000", "single_f076")
+    roots = [demo_copy(tmp_path / name, tags) for name in ("a", "b", "c")]
+    truncated = '{"schema": "inspector.votes/1", "votes": [{"id": "x", "time": "2026'
+    (roots[2] / "votes.json").write_text(truncated)
+    app = serve(roots, port=0, block=False, ab=True)
+    try:
+        gone = roots[1] / "rollouts" / "single_f076" / "video"
+        shutil.rmtree(gone)  # after the start: the session was read with it
+        with HeadlessClient(app.port, observe=True) as client:
+            client.wait_until(lambda: app.ab_tabs and client.html_containing("data-ab-pair"), what="a pair")
+            tab = next(iter(app.ab_tabs.values()))
+            for n in range(3):
+                assert tab.shown is not None
+                (ia, ta), (ib, tb) = tab.shown
+                assert {ia, ib} == {0, 1} and ta == tb == "single_f000"  # never c, never the vanished rollout
+                assert tab.vote("a") is not None
+                client.wait_until(lambda n=n: f"data-ab-pair='{n + 2}'" in client.html_containing("data-ab-pair"),
+                                  what=f"pair {n + 2}")
+            card = client.html_containing("data-ab-problem")
+            assert str(roots[2] / "votes.json") in card and "invalid JSON" in card
+            assert str(gone) in card and card.count("data-ab-problem") == 2
+    finally:
+        app.stop()
+    assert (roots[2] / "votes.json").read_text() == truncated
+    assert len(json.loads((roots[0] / "votes.json").read_text())["votes"]) == 3

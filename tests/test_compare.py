@@ -145,6 +145,26 @@ def test_compare_finds_the_worsened_rollouts(comparison):
     assert (drift["n_compared"], drift["a_better"], drift["b_better"]) == (16, len(WORSENED), 0)
 
 
+def test_compare_gives_no_verdict_its_test_cannot_support(comparison):
+    """3 worse pairs of 16, the rest tied: the signed-rank test (the same p as the summary's) could
+    not reach 0.05 with 3 pairs, so no side is called better; the JSON is strict, success is not
+    compared twice, and the sides are named by their session's model and checkpoint."""
+    tests = {t["metric"]: t for t in comparison["tests"]}
+    for metric in ("rmse_deg", "time_aligned_drift_deg"):
+        t = tests[metric]
+        assert t["verdict"] == f"too few pairs to tell (n = {len(WORSENED)}; needs >= 6)", t
+        assert t["ci95"] is None and t["n_informative"] == len(WORSENED)
+    assert tests["rmse_deg"]["p"] == comparison["summary"]["wilcoxon_p"]
+    assert "success" not in comparison
+    model = json.loads((DEMO / "session.json").read_text())["model"]
+    label = f"{model['name']}@{model['checkpoint']}"
+    assert comparison["names"] == {"a": label, "b": label}
+    json.dumps(comparison, allow_nan=False)
+    text = format_comparison(comparison)
+    assert text.splitlines()[0] == f"A: {comparison['names']['a']} ({comparison['a']})"
+    assert "A better:" not in text and "B better:" not in text
+
+
 def test_compare_delta_of_a_single_chunk_is_the_offset_s_effect(comparison):
     """B's RMSE of single_f076 recomputed from A's own predicted and GT joints plus the offset."""
     p = next(p for p in comparison["pairs"] if p["a"]["tag"] == "single_f076")

@@ -11,6 +11,7 @@ import pytest
 
 from inspector.analysis.metrics import prompt_divergence
 from inspector.analysis.timeline import build_timeline
+from inspector.data.cameras import read_cameras
 from inspector.data.session import open_session
 from inspector.demo.generate import DEMO_DIR
 from inspector.report.build import format_report
@@ -154,6 +155,8 @@ def test_quick_rebuild(tmp_path):
     assert out.returncode == 0, out.stderr
     session = open_session(tmp_path / "d")
     assert not session.errors and {"tempo_0.8x", "limits_wrist"} <= set(session.rollouts)
+    cameras = read_cameras(tmp_path / "d" / "cameras.json")  # the scene's exact cameras, at its frame size
+    assert set(cameras) == {"front", "wrist"} and cameras["front"].width == 64
     assert any(r.kind == "single_chunk" for r in session.rollouts.values())
     tl = build_timeline(session.rollouts["tempo_0.8x"])
     assert tl.has_gt_joints and tl.time_aligned_drift.mean() > tl.best_match_drift.mean()

@@ -9,15 +9,18 @@ from __future__ import annotations
 
 import datetime
 import json
+import re
 import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 from cli_processes import module_command_server
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from served_layout import read_stamp, save_client_episode, save_prediction, served_frames
 
-from inspector.data.importers.dreamzero_served import Timing, import_served, parse_grid
+from inspector.data.importers.dreamzero_served import Timing, distinct_tags, import_served, parse_grid, parse_name
 from inspector.data.session import open_session
 from inspector.data.video import VideoClip
 from inspector.errors import InspectorError
@@ -209,3 +212,37 @@ def test_export_of_a_served_session_verifies(imported, tmp_path):
     assert files
     for f in files:
         rrd_verify(f)
+
+
+def test_names_that_make_the_same_tag_become_two_rollouts_each_with_its_own_tag(tmp_path):
+    out = tmp_path / "video_pred_output"
+    out.mkdir()
+    # the server keeps only letters, digits and _-. of a prompt; a file renamed by hand (or copied
+    # from elsewhere) may hold a space, which a tag spells as _ too
+    frames = served_frames(1)
+    spaced = save_prediction(out, "a_b", frames, WHEN).rename(out / "000003_a b_03_14_15_09_26.mp4")
+    plain = save_prediction(out, "a_b", frames, WHEN).rename(out / "000003_a_b_03_14_15_09_26.mp4")
+    result = cli("report", "--json", "--no-cache", out)
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    tags = [r["tag"] for r in report["rollouts"]]
+    assert len(tags) == 2 and len(set(tags)) == 2 and not report.get("errors")
+    assert all(t.startswith("000003_a_b_03_14_15_09_26_") for t in tags)
+    # the same names give the same tags on the next import, with another file beside them
+    save_prediction(out, "something else", frames, WHEN)
+    dest, errors = import_served(out, tmp_path / "s", log=lambda _: None)
+    assert errors == {}
+    again = open_session(dest)
+    assert set(tags) <= set(again.rollouts)
+    sources = {again.rollouts[t].extra["source"]["path"] for t in tags}
+    assert sources == {str(spaced.resolve()), str(plain.resolve())}
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.text(alphabet="aAb _-.é", min_size=1, max_size=6), min_size=1, max_size=8))
+def test_no_two_served_files_share_a_tag_whatever_their_names(prompts):
+    names = [f"{i % 3:06}_{p}_03_14_15_09_26.mp4" for i, p in enumerate(prompts)]
+    videos = [v for v in (parse_name(Path(n)) for n in dict.fromkeys(names)) if v is not None]
+    tags = [v.tag for v in distinct_tags(videos)]
+    assert len({t.lower() for t in tags}) == len(tags)
+    assert all(re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,127}", t) for t in tags)

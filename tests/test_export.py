@@ -193,7 +193,7 @@ def synthetic_session(tmp_path_factory) -> Path:
     with SessionWriter.create(root, model={"name": "synthetic-wam", "checkpoint": "step-1"}) as w:
         w.add_rollout("slow", kind="autoregressive", actions=chunks, prompt="Reach and return",
                       episode_index=0, videos={"front": _frames(540, 32, 48, 0)},
-                      gt_actions=gt, gt_videos={"front": _frames(400, 48, 64, 1)},
+                      gt_actions=gt, gt_videos={"front": _frames(400, 48, 72, 1)},  # 3:2, as the imagined 48x32
                       gt_episode_length=400)
         w.add_rollout("short", kind="autoregressive", actions=_slow_prediction(gt, 3),
                       prompt="Short", videos={"front": _frames(27, 32, 48, 2)}, gt_actions=gt[:60])
@@ -342,7 +342,7 @@ def test_dataset_gt_video_is_reencoded_to_h264(lerobot_dir, tmp_path):
 
         gt = LeRobotDataset(dataset).episode(1).action
         w.add_rollout("ep1", kind="autoregressive", actions=_slow_prediction(gt, 4, speed=1.0),
-                      episode_index=1, start_frame=20, videos={"front": _frames(36, 32, 48, 3)})
+                      episode_index=1, start_frame=20, videos={"front": _frames(36, 36, 48, 3)})  # 4:3, as the dataset's
         # imagines a camera the dataset lacks: every dataset camera is then a GT-only view
         w.add_rollout("side", kind="autoregressive", actions=_slow_prediction(gt, 4, speed=1.0),
                       episode_index=1, start_frame=20, videos={"side": _frames(36, 32, 48, 4)})

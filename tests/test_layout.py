@@ -22,7 +22,7 @@ REPO = PACKAGE_DIR.parent
 
 # Layers, lowest first: a module may import from its own layer and those below it, never above.
 LAYERS = [
-    {"errors", "units", "schema", "cache", "progress", "_lazy", "_files", "stats"},
+    {"errors", "units", "schema", "cache", "progress", "_lazy", "_files", "_signals", "_flag_values", "stats"},
     {"robot"},
     {"data"},
     {"outcomes"},

@@ -158,7 +158,8 @@ class Workspace:
                           episode_index=0, start_frame=0, prompt="Pick the red cube")
             w.add_rollout("r1", kind="autoregressive", actions=rng.normal(0, 5, (2, 24, 6)),
                           episode_index=1, start_frame=0,
-                          videos={"front": rng.integers(0, 255, (18, 32, 48, 3), dtype=np.uint8)})
+                          # 4:3, as the dataset's camera (frames of another geometry are not compared)
+                          videos={"front": rng.integers(0, 255, (18, 36, 48, 3), dtype=np.uint8)})
             if long:  # 20 chunks x 9 = 180 steps in a 150-frame episode: 3 chunks start after it
                 w.add_rollout("long", kind="autoregressive", actions=rng.normal(0, 5, (20, 24, 6)),
                               episode_index=0, start_frame=0)

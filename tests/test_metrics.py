@@ -60,17 +60,19 @@ def test_frames_shown_while_comparing_do_not_change_the_psnr(imported_session):
     """The app compares a view while it caches the frames it shows (``on_imagined``/``on_gt``),
     reusing the GT frame scaled for display: the PSNR is the one computed without them, and
     each GT frame shown is the clip's frame scaled to the imagined size."""
-    from inspector.analysis.video_metrics import compare_clips
+    from inspector.analysis.video_metrics import compare_clips, resizes_whole_frame
 
     tl = build_timeline(open_session(imported_session).rollouts["ep000_train"])
     imagined, gt = tl.rollout.video("front"), tl.gt.clips["front"]
     size = imagined.info().width, imagined.info().height
     assert (gt.info().width, gt.info().height) != size  # the GT is scaled: the costly path
+    whole_frame = resizes_whole_frame(tl.rollout.extra)  # 640x480 squashed to 320x176, as the model saw it
+    assert whole_frame
     shown_gt: dict[int, np.ndarray] = {}
     with_frames = compare_clips("front", [imagined], gt, tl.gt_index_of_frame("front"),
                                 on_imagined=lambda b, f, rgb: None,
-                                on_gt=lambda i, rgb: shown_gt.setdefault(i, rgb.copy()))[0]
-    alone = compare_clips("front", [imagined], gt, tl.gt_index_of_frame("front"))[0]
+                                on_gt=lambda i, rgb: shown_gt.setdefault(i, rgb.copy()), whole_frame=whole_frame)[0]
+    alone = compare_clips("front", [imagined], gt, tl.gt_index_of_frame("front"), whole_frame=whole_frame)[0]
     np.testing.assert_array_equal(with_frames.psnr_db, alone.psnr_db)
     assert np.isfinite(alone.psnr_db).sum() > 100
     for i, rgb in gt.iter_frames(size):

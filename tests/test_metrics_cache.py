@@ -29,6 +29,7 @@ from hypothesis import strategies as st
 
 from inspector.cache import SCHEMA, decode_entry
 from inspector.data.video import VideoClip, encode_h264
+from inspector.report.build import FIELDS_SET_AFTER_CACHE
 from inspector.report.entries import MetricsEntry, is_consistent
 from inspector.report.rows import RolloutRow
 from inspector.schema import mismatch
@@ -129,13 +130,17 @@ def entry_bytes(warm_cache: Path) -> list[tuple[Path, bytes]]:
 # One definition: what the report writes is what the cache accepts
 
 
+AFTER_CACHE = FIELDS_SET_AFTER_CACHE  # set on each row after the cache: outcomes, what the source says
+
+
 def test_every_row_written_is_a_rollout_row_and_reads_back_as_written(warm_cache: Path, no_cache_report: str):
     rows = {r["tag"]: r for r in json.loads(no_cache_report)["rollouts"]}
     for path in entry_files(warm_cache):
         entry = read_back(path)
         assert entry is not None and mismatch(entry["row"], RolloutRow) is None
-        # the report adds the outcomes after the cache (they change without the rollout changing)
-        reported = {k: v for k, v in rows[entry["row"]["tag"]].items() if k not in ("outcome_sources", "task_outcome")}
+        # the report adds the outcomes and what the source says after the cache (they change
+        # without the rollout changing)
+        reported = {k: v for k, v in rows[entry["row"]["tag"]].items() if k not in AFTER_CACHE}
         assert entry["row"] == reported
         assert set(entry["video"]) == {"front", "wrist"}
 
@@ -167,7 +172,7 @@ def test_a_fully_cached_report_starts_no_workers(session: Path, warm_cache: Path
     rows = {r["tag"]: r for r in json.loads(no_cache_report)["rollouts"]}
     assert sorted(o.tag for o in outcomes) == sorted(ROLLOUTS) and all(o.cached for o in outcomes)
     for o in outcomes:
-        assert o.row == {k: v for k, v in rows[o.tag].items() if k not in ("outcome_sources", "task_outcome")}
+        assert o.row == {k: v for k, v in rows[o.tag].items() if k not in AFTER_CACHE}
 
 
 def test_a_report_looks_up_until_its_first_miss(session: Path, warm_cache: Path, tmp_path: Path) -> None:

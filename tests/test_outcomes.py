@@ -118,7 +118,7 @@ def test_outcome_files_json_lines_and_csv(tmp_path: Path) -> None:
     ('{"tag": "a", "failure": "exploded"}\n', "line 1: failure: unknown tag 'exploded'"),
     ('{"success": true}\n', "line 1: no 'tag' or 'episode'"),
     ("tag,success\na,perhaps\n", "line 2: success: expected true/false"),
-    ('{"tag": "a", "progress": NaN}\n', "line 1: not JSON"),
+    ('{"tag": "a", "progress": NaN}\n', "line 1: progress: non-finite number nan"),
 ])
 def test_bad_outcome_files_name_the_line_and_field(tmp_path: Path, text: str, message: str) -> None:
     f = tmp_path / "bad.jsonl"

@@ -37,6 +37,7 @@ GOOD = {"dir": "run_k7", "name": "ckpt_alpha_7731", "model": "alpha-model-x"}
 WORSE = {"dir": "run_q2", "name": "ckpt_omega_1942", "model": "omega-model-y"}
 SECRETS = [GOOD["name"], GOOD["model"], WORSE["name"], WORSE["model"], GOOD["dir"], WORSE["dir"]]
 VOTES = 6  # the last one a tie
+REVEALED = "() => document.querySelector('[data-ab-revealed]')?.textContent || ''"  # the names shown after a vote
 
 
 def _copy(dest: Path, who: dict) -> Path:
@@ -85,9 +86,11 @@ def test_blind_votes_by_keys_rank_the_planted_worse_checkpoint_last(tmp_path, br
                 page.get_by_label("progress A [%]").press("Tab")
                 page.evaluate("document.activeElement && document.activeElement.blur()")
             page.keyboard.press("=" if k == VOTES else better.lower())
+            # the names show beside the pair just judged, and go when the next pair comes
+            wait_until(lambda: all(s in page.evaluate(REVEALED) for s in (GOOD["name"], WORSE["name"])),
+                       what=f"pair {k}'s names")
             wait_until(lambda: page.locator(f"[data-ab-pair='{k + 1}']").count() == 1, what=f"pair {k + 1}")
-            revealed = page.locator("[data-ab-revealed]").inner_text()
-            assert GOOD["name"] in revealed and WORSE["name"] in revealed
+            wait_until(lambda: page.evaluate(REVEALED) == "", what=f"no names beside pair {k + 1}")
         page.close()
     finally:
         app.stop()

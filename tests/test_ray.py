@@ -27,6 +27,7 @@ import pytest
 from demo_copies import demo_copy
 
 from inspector.errors import InspectorError
+from inspector.report.build import FIELDS_SET_AFTER_CACHE as AFTER_CACHE
 from inspector.report.build import build_report
 from inspector.report.tasks import Task, rollouts_per_task, run_task, run_tasks_on_ray
 
@@ -295,8 +296,9 @@ def test_ray_workers_honour_the_metrics_cache(demo_reports, local_ray):
     session = str(demo_reports["session"])
     again = run_task(Task(session, tags, None, 2.0, str(cache)))  # here, from what Ray's workers wrote
     assert [o.cached for o in again] == [True] * len(tags)
-    # the report adds the outcomes after the cache (they change without the rollout changing)
-    reported = [{k: v for k, v in r.items() if k not in ("outcome_sources", "task_outcome")} for r in first["rollouts"]]
+    # the report adds the outcomes and what the source says after the cache (they change without
+    # the rollout changing)
+    reported = [{k: v for k, v in r.items() if k not in AFTER_CACHE} for r in first["rollouts"]]
     assert [json.loads(json.dumps(o.row)) for o in again] == reported  # as the command writes rows
     outcomes = [o for batch in run_tasks_on_ray(local_ray, [Task(session, tags, None, 2.0, str(cache))]) for o in batch]
     assert all(o.cached for o in outcomes) and len(outcomes) == len(tags)

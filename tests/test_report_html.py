@@ -15,9 +15,11 @@ import pytest
 from browser import canvas_is_drawn, skip_reason, wait_until
 
 from inspector.report.build import build_report
+from inspector.report.decision_html import ranking_figure
 from inspector.report.figures import joint_overlay, per_step_rmse, rmse_by_position
 from inspector.report.html import render_report_html
-from inspector.report.svg import Axes, legend_html, nice_ticks
+from inspector.report.sanity_html import degradation_figure, verdict_table
+from inspector.report.svg import N_COLOURS, Axes, legend_html, nice_ticks, series_style
 
 pytestmark = pytest.mark.slow  # reports written by the CLI
 
@@ -266,6 +268,79 @@ def test_legend_is_html_with_keys():
     assert 'data-key="7"' in html and "run &lt;1&gt;" in html and "<rect" in html
 
 
+def _tick_texts(svg: str) -> list[str]:
+    return re.findall(r'<line class="tick"[^>]*/><text[^>]*>([^<]*)</text>', svg)
+
+
+def test_named_ticks_stand_for_the_numbers_and_slant_when_long():
+    ax = Axes(x_min=0.5, x_max=3.5, width=420, x_ticks=[(1, "step-72000"), (2, "step-64000"), (3, "a<b")])
+    ax.points([1, 2, 3], [0.1, 0.2, 0.3], "c0")
+    svg = ax.svg()
+    assert _tick_texts(svg) == ["step-72000", "step-64000", "a&lt;b"]  # no 0.5, 1.5 ... ticks
+    assert "rotate(-35" not in svg
+    mapping = _charts(f'<figure id="f">{svg}</figure>')[0][0]
+    xs = [float(x) for x in re.findall(r'<line class="tick" x1="([^"]+)"', svg)]
+    x0, x1, px0, px1 = mapping["x"]
+    np.testing.assert_allclose([x0 + (x - px0) / (px1 - px0) * (x1 - x0) for x in xs], [1, 2, 3], atol=0.01)
+    # names longer than their room are slanted, and the plot gives them the height they take
+    long = Axes(x_min=0.5, x_max=3.5, width=420, x_ticks=[(i, f"checkpoint-{i}-of-a-long-run") for i in (1, 2, 3)])
+    long.points([1, 2, 3], [0.1, 0.2, 0.3], "c0")
+    slanted = long.svg()
+    assert slanted.count("rotate(-35") == 3
+    plot_bottom = lambda svg: float(re.search(r'data-y="\S+ \S+ (\S+)', svg).group(1))  # noqa: E731
+    assert plot_bottom(slanted) < plot_bottom(svg) - 40
+
+
+def test_long_session_names_stay_apart_on_the_ranking_axis():
+    rows = [{"session": f"dreamzero-so101-finetune-run-a-step-{k}000", "model": "m", "success_rate": 0.5, "low": 0.2,
+             "high": 0.8, "successes": 2, "episodes": 4} for k in (8, 16, 24)]
+    svg = ranking_figure({"method": "success_rate", "note": "", "ranking": rows})
+    names = _tick_texts(svg)
+    assert len(set(names)) == 3 and all(n.endswith(f"step-{k}000") and n.startswith("dreamz") for n, k in zip(names, (8, 16, 24)))
+
+
+def test_markers_tell_points_apart_by_shape_in_the_chart_and_its_legend():
+    ax = Axes(x_min=0, x_max=1, y_min=0, y_max=1)
+    for i, shape in enumerate(("circle", "square", "triangle", "diamond")):
+        ax.points([i / 4], [0.5], "c1", keys=[shape], label=shape, marker=shape)
+    svg, legend = ax.svg(), legend_html(ax.legend)
+    assert re.search(r'<circle class="pt c1" data-key="circle"', svg) and re.search(r'<rect class="pt c1" data-key="square"', svg)
+    triangle = re.search(r'<path class="pt c1" data-key="triangle" d="([^"]+)"', svg).group(1)
+    diamond = re.search(r'<path class="pt c1" data-key="diamond" d="([^"]+)"', svg).group(1)
+    assert triangle.count("L") == 2 and diamond.count("L") == 3
+    assert [m for m in re.findall(r"<(circle|rect|path) class=\"pt", legend)] == ["circle", "rect", "path", "path"]
+
+
+def test_more_lines_than_colours_are_told_apart_by_dashes():
+    styles = [series_style(i) for i in range(2 * N_COLOURS)]
+    assert len(set(styles)) == 2 * N_COLOURS
+    assert styles[0] == ("c0", "line") and styles[N_COLOURS] == ("c0 alt", "dash")
+
+
+def test_where_the_dream_breaks_names_every_rollout(demo_report):
+    rows = [r for r in demo_report["rollouts"] if r.get("video_degradation")]
+    rows = (rows + [{**r, "tag": f"{r['tag']}_copy"} for r in rows])[:2 * N_COLOURS]  # more than the colours
+    fig = degradation_figure(rows, [str(i) for i in range(len(rows))])
+    assert fig is not None and len(rows) > N_COLOURS
+    named = {key: label for _, label, _, key in fig.legend if key is not None}
+    assert named == {str(i): r["tag"] for i, r in enumerate(rows)}
+    assert len({(cls, style) for cls, _, style, _ in fig.legend}) == len(fig.legend)  # no two alike
+    for panel in fig.panels:  # each curve carries its rollout's key, and its legend entry's colour and dash
+        for cls, key in re.findall(r'<path class="ln ([^"]+)" data-key="([^"]+)"', panel.svg):
+            assert (cls, "dash" if "alt" in cls else "line") in {(c, s) for c, _, s, k in fig.legend if k == key}
+    many = degradation_figure(rows + rows[:1])  # beyond twice the colours: alike, as "each rollout"
+    assert many is not None and [label for _, label, _, _ in many.legend] == ["break threshold (2x the first chunk)",
+                                                                              "each rollout"]
+
+
+def test_the_verdict_table_wraps_its_long_columns():
+    tests = [{"test": "joint coherence", "verdict": "partial", "figure": "a " * 200, "threshold": "b " * 100}]
+    html = verdict_table(tests, "sanity 0/1")
+    assert '<div class="table-wrap"><table id="sanity" class="wrap">' in html and html.count('<th class="long">') == 2
+    css = (Path(__file__).resolve().parents[1] / "inspector" / "report" / "assets" / "report.css").read_text()
+    assert "table.wrap td { white-space: normal;" in css
+
+
 # ----------------------------------------------------------------------------------------------
 # The command, and the size of the page
 
@@ -284,8 +359,8 @@ def demo_page(tmp_path_factory) -> Path:
     assert (out / "bias_elbow.rrd").is_file()
     run = _cli("report", DEMO, "--html", out / "report.html")
     assert run.returncode == 0, run.stderr
-    assert "Autoregressive rollouts" in run.stdout  # the text tables as before
-    assert f"wrote {out / 'report.html'}" in run.stderr
+    assert run.stdout == ""  # the page was asked for: the text tables only with --text or --json
+    assert run.stderr.strip().splitlines()[-1] == f"wrote {out / 'report.html'}"
     return out / "report.html"
 
 

@@ -192,7 +192,9 @@ def test_compare_pairs_video_only_rows_by_psnr_and_success(evaluation, tmp_path)
     assert (psnr["n_compared"], psnr["a_better"], psnr["b_better"]) == (3, 3, 0)
     deltas = [p["delta_video_psnr_db"]["render"] for p in c["pairs"]]
     assert psnr["mean_delta_db"] == pytest.approx(np.mean(deltas)) and max(deltas) < 0
-    assert c["success"] == {"n_compared": 3, "both": 1, "only_a": 1, "only_b": 1, "neither": 0}
+    success = {t["metric"]: t for t in c["tests"]}["success"]  # the one success comparison
+    assert success["paired"] and success["n_pairs"] == 3
+    assert success["pairs"] == {"both": 1, "only_a": 1, "only_b": 1, "neither": 0} and "success" not in c
     from inspector.report.compare import format_comparison
 
     text = format_comparison(c)  # what compare prints without --json, from the same comparison

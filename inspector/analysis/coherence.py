@@ -3,8 +3,11 @@ real arm's coupling?
 
 **Phase offset** (per joint): the lag ``l`` (steps, within +-:data:`MAX_LAG_S`) that maximises the
 Pearson correlation of the predicted joint's velocity at ``t`` with the GT's at ``t - l``, over the
-in-episode steps; positive: the prediction runs behind the GT. Null for a joint whose GT hardly
-moves (velocity standard deviation under :data:`MIN_MOTION` per step), where no lag is defined.
+in-episode steps; positive: the prediction runs behind the GT. Null ("not determined") for a
+joint whose GT hardly moves (velocity standard deviation under :data:`MIN_MOTION` per step), where
+no lag is defined, and for a best lag at the edge of the search window (the window shrinks to a
+third of the series, so on a short chunk the correlation often just keeps rising towards the edge:
+the true lag may lie beyond it, and such an argmax says nothing).
 
 **Coupling error** (per pair of neighbouring joints a-b: shoulder_lift-elbow_flex,
 elbow_flex-wrist_flex): the RMS over in-episode steps of the predicted relative angle
@@ -68,7 +71,7 @@ def phase_offsets(pred: npt.ArrayLike, gt: npt.ArrayLike | GtMotion, max_lag: in
     n = vg.shape[1]
     if n < 4:
         return [None] * vg.shape[0]
-    max_lag = max(0, min(max_lag, n // 3))
+    max_lag = search_window(n, max_lag)
     lags = _lags(max_lag)
     # sum_t vp[t] vg[t - lag], every lag at once as a circular cross-correlation by FFT, long
     # enough (2n) that no wanted lag wraps around (np.correlate per joint cost 4x as much)
@@ -96,6 +99,12 @@ def phase_offsets(pred: npt.ArrayLike, gt: npt.ArrayLike | GtMotion, max_lag: in
     return [int(b) if mv and k.any() else None for b, mv, k in zip(best, g.moving, ok)]
 
 
+def search_window(n_velocities: int, max_lag: int) -> int:
+    """The lags searched, +-this many steps: ``max_lag``, at most a third of the ``n_velocities``
+    velocity steps (so that every lag still pairs two thirds of the series)."""
+    return max(0, min(max_lag, n_velocities // 3))
+
+
 @functools.lru_cache(maxsize=8)
 def _lags(max_lag: int) -> npt.NDArray[np.int64]:
     """-max_lag..max_lag, smallest magnitude first (so that argmax prefers it among ties)."""
@@ -112,10 +121,12 @@ def coupling_error(pred: npt.ArrayLike, gt: npt.ArrayLike, a: int, b: int) -> fl
 class CoherenceJson(TypedDict):
     """The ``joint_coherence`` field of a report row."""
 
-    phase_offset_steps: dict[str, int | None]
+    phase_offset_steps: dict[str, int | None]  # null: not determined (phase_undetermined says why)
     phase_offset_s: dict[str, float | None]
+    phase_window_steps: int  # the lags searched: +-this many steps
+    phase_undetermined: dict[str, str]  # joint -> why its offset is null
     coupling_error_deg: dict[str, float]
-    out_of_phase: list[str]
+    out_of_phase: list[str]  # determined offsets over PHASE_FLAG_STEPS only (never a window edge)
 
 
 def coherence_record(pred: npt.ArrayLike, gt_aligned: npt.ArrayLike, in_episode: npt.ArrayLike, fps: float,
@@ -131,10 +142,22 @@ def coherence_record(pred: npt.ArrayLike, gt_aligned: npt.ArrayLike, in_episode:
     if len(p) < 8:
         return None
     max_lag = int(round(MAX_LAG_S * fps))
-    steps = dict(zip(JOINT_NAMES, phase_offsets(p, g if motion is None else motion, max_lag)))
+    window = search_window(len(p) - 1, max_lag)
+    motion = gt_motion(g) if motion is None else motion
+    best = phase_offsets(p, motion, max_lag)
+    steps: dict[str, int | None] = {}
+    undetermined: dict[str, str] = {}
+    for name, lag, moving in zip(JOINT_NAMES, best, motion.moving):
+        if lag is None:
+            undetermined[name] = "the GT joint hardly moves" if not moving else "the predicted joint does not move"
+        elif abs(lag) >= window:  # the correlation still rising at the edge: the lag may lie beyond
+            undetermined[name] = f"best lag at the edge of the +-{window}-step window"
+        steps[name] = None if name in undetermined else lag
     index = {name: j for j, name in enumerate(JOINT_NAMES)}
     coupling = {f"{a}-{b}": round(coupling_error(p, g, index[a], index[b]), 4) for a, b in COUPLED_PAIRS}
     return {"phase_offset_steps": steps,
             "phase_offset_s": {k: None if v is None else round(v / fps, 4) for k, v in steps.items()},
+            "phase_window_steps": window,
+            "phase_undetermined": undetermined,
             "coupling_error_deg": coupling,
             "out_of_phase": [k for k, v in steps.items() if v is not None and abs(v) > PHASE_FLAG_STEPS]}

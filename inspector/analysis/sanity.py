@@ -16,12 +16,13 @@ import numpy.typing as npt
 
 from ..data.session import CHAINED_KINDS
 from ..robot.kinematics import kinematics
+from ..units import ARM_JOINTS, to_radians
 from .coherence import CoherenceJson, GtMotion, coherence_record, gt_motion
 from .completion import CompletionJson, CompletionTarget, completion_record, completion_target
 from .measures_switch import sanity_measures_on
 from .seams import Seams, SeamsJson, jerk_p95, seam_jumps, seams_record
 from .timeline import RolloutTimeline
-from .video_break import VideoBreakJson, video_break_record
+from .video_break import VideoBreakJson, chunk_arm_travel, video_break_record
 from .video_metrics import VideoMetrics
 
 
@@ -68,8 +69,10 @@ def sanity_measures(tl: RolloutTimeline, video: Mapping[str, VideoMetrics],
     if chained:
         per_view = {v: vm.quality for v, vm in video.items() if vm.quality is not None}
         per_view.update(imagined_quality or {})
+        travel = _arm_travel(tl)
         for view in sorted(per_view):
-            degradation[view] = video_break_record(per_view[view], tl.rollout.frames_per_chunk)
+            degradation[view] = video_break_record(per_view[view], tl.rollout.frames_per_chunk,
+                                                   arm_travel_deg=travel)
     latents = tl.rollout.latents
     return {"seams": seams, "completion": completion, "joint_coherence": coherence,
             "video_break": {v: d["break_chunk"] for v, d in degradation.items()},
@@ -77,9 +80,19 @@ def sanity_measures(tl: RolloutTimeline, video: Mapping[str, VideoMetrics],
             "latents": None if latents is None else {"n": int(latents.shape[0]), "dim": int(latents.shape[1])}}
 
 
+def _arm_travel(tl: RolloutTimeline) -> npt.NDArray[np.float64] | None:
+    """(N,) how far the predicted arm moves in each chunk [deg] (a still video is frozen only
+    while it moves), or None for a rollout without joints."""
+    if not tl.has_joints:
+        return None
+    arm = np.degrees(to_radians(tl.pred, tl.units))[:, :len(ARM_JOINTS)]
+    return chunk_arm_travel(arm, tl.step_chunk, tl.n_chunks)
+
+
 def rollout_seams(tl: RolloutTimeline) -> Seams | None:
-    """Every chunk seam of a chained rollout (None for others), flagged with its tolerances."""
-    if tl.kind not in CHAINED_KINDS:
+    """Every chunk seam of a chained rollout (None for others, and for a video-only one: its
+    actions are not there, so there is no seam to measure), flagged with its tolerances."""
+    if tl.kind not in CHAINED_KINDS or not tl.has_joints:
         return None
     inside = ~tl.post_episode if tl.post_episode is not None else np.ones(tl.n_steps, bool)
     return seam_jumps(tl.chunks, tl.executed_per_chunk, tl.gt_aligned, inside, tl.measures.seam_multiple,

@@ -58,10 +58,17 @@ def seam_jumps(chunks: npt.ArrayLike, executed_per_chunk: int, gt_aligned: npt.A
     """The seams of (N, H, 6) predicted chunks, each executing its first ``executed_per_chunk``.
 
     Args:
+        chunks: finite values: a rollout without predicted actions (video only) has no seams, and
+            its caller does not measure it (a jump from NaN would be written as a figure).
         gt_aligned: (T, 6) GT at each executed step (T = N * E), or None.
         in_episode: (T,) True for steps before the real episode's end (default: all).
+
+    Raises:
+        ValueError: ``chunks`` holds a non-finite value.
     """
     c = np.asarray(chunks, np.float64)
+    if not np.isfinite(c).all():
+        raise ValueError("seam_jumps: predicted actions with non-finite values have no seams to measure")
     e = executed_per_chunk
     n = c.shape[0]
     jump = c[1:, 0] - c[:-1, e - 1] if n > 1 else np.zeros((0, c.shape[-1]))

@@ -28,7 +28,7 @@ from . import metrics
 from .measure_settings import DEFAULT_MEASURES, MeasureSettings
 from .sweep import SweepMetrics, sweep_metrics
 from .video_action import JointTimes, VideoAction, agreement
-from .video_metrics import VideoMetrics, compare_clips
+from .video_metrics import VideoMetrics, compare_clips, resizes_whole_frame
 
 Array = npt.NDArray[np.float64]
 
@@ -209,7 +209,8 @@ class RolloutTimeline:
         if vm is None or (with_ssim and vm.ssim is None):
             clip = self.rollout.video(view)
             gt = self.gt.clips.get(view)
-            vm = compare_clips(view, [clip], gt, self.gt_index_of_frame(view), with_ssim)[0]
+            vm = compare_clips(view, [clip], gt, self.gt_index_of_frame(view), with_ssim,
+                               whole_frame=resizes_whole_frame(self.rollout.extra))[0]
             self.set_video_metrics(vm)
         return vm
 

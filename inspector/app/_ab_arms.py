@@ -16,9 +16,9 @@ import numpy as np
 
 from ..analysis.timeline import build_timeline
 from ..data.session import Rollout
-from ..robot.description import VIEW_DIRECTION
+from ..robot.description import VIEW_DIRECTION, bounding_sphere
 from ._robot import ArmView, SharedRobot
-from ._scene import GT_COLOR, PRED_COLOR, TABLE_RGB, RolloutScene, _NoArm
+from ._scene import GT_COLOR, PRED_COLOR, TABLE_RGB, RolloutScene, _aspect, _NoArm
 
 SIDES = ("A", "B")
 SIDE_OFFSET_M = 0.3  # each side's base from the middle: two arms at full reach still do not touch
@@ -26,6 +26,7 @@ SIDE_OFFSET_M = 0.3  # each side's base from the middle: two arms at full reach 
 _RIGHT = np.array([-VIEW_DIRECTION[1], VIEW_DIRECTION[0], 0.0]) / np.hypot(VIEW_DIRECTION[0], VIEW_DIRECTION[1])
 LOOK_AT = (0.12, 0.0, 0.1)
 CAMERA_DISTANCE_M = 1.3  # both sides' arms in view on a canvas about as wide as high
+LABEL_HEIGHT_M = 0.42  # each side's letter, above its arms
 
 
 def side_origin(side: str) -> tuple[float, float, float]:
@@ -61,16 +62,17 @@ class PairArms:
         self.labels = {}
         for side in SIDES:
             scene.add_frame(f"/ab/{side}", show_axes=False, position=side_origin(side))
-            self.labels[side] = scene.add_label(f"/ab/{side}/label", side, position=(0.0, 0.0, 0.42),
+            self.labels[side] = scene.add_label(f"/ab/{side}/label", side, position=(0.0, 0.0, LABEL_HEIGHT_M),
                                                 font_screen_scale=2.0, anchor="bottom-center")
             self.arms[side] = {"gt": arm(client, robot, f"/ab/{side}/gt", GT_COLOR),
                                "pred": arm(client, robot, f"/ab/{side}/pred", PRED_COLOR)}
         self.data: dict[str, RolloutScene | None] = dict.fromkeys(SIDES)
-        try:
-            client.camera.position = tuple(np.asarray(LOOK_AT) + CAMERA_DISTANCE_M * np.asarray(VIEW_DIRECTION))
-            client.camera.look_at = LOOK_AT
-        except AttributeError:  # a server has no one camera: its initial camera is the app's
-            pass
+        self._camera = getattr(client, "camera", None)  # a server has no one camera: the app's initial one
+        self._framed: tuple[float, np.ndarray] | None = None  # (canvas aspect, camera position) of the last fit
+        if self._camera is not None:
+            self._camera.position = tuple(np.asarray(LOOK_AT) + CAMERA_DISTANCE_M * np.asarray(VIEW_DIRECTION))
+            self._camera.look_at = LOOK_AT
+            self._camera.on_update(lambda _: self._camera_reported())
 
     @property
     def n_steps(self) -> int:
@@ -84,6 +86,48 @@ class PairArms:
             self.arms[side]["pred"].visible = data is not None
             self.arms[side]["gt"].visible = data is not None and data.q_gt is not None
         self.set_step(0)
+        self._framed = None
+        self.frame()
+
+    def frame(self) -> None:
+        """Point the camera at both sides' arms over their whole rollouts and their letters, fitted
+        to the canvas (the narrower of its two fields of view) as the rollout view fits its arm: the
+        arms fill the view rather than stand small in a large scene."""
+        camera = self._camera
+        if camera is None:
+            return
+        points = []
+        for side, data in self.data.items():
+            origin = np.asarray(side_origin(side))
+            points.append(origin + np.array([[0.0, 0.0, 0.0], [0.0, 0.0, LABEL_HEIGHT_M]]))
+            if data is not None:
+                points.append(data.joint_pos.reshape(-1, 3) + origin)
+        centre, radius = bounding_sphere(np.concatenate(points))
+        try:
+            fov, aspect = float(camera.fov), _aspect(camera)
+        except AssertionError:  # the browser has not reported its camera yet: fit once it has
+            return
+        tan_v = np.tan(fov / 2)
+        position = centre + np.asarray(VIEW_DIRECTION) * radius / (0.9 * min(tan_v, tan_v * aspect))
+        camera.position = tuple(float(v) for v in position)  # position first: viser moves look_at with it
+        camera.look_at = tuple(float(v) for v in centre)
+        self._framed = (aspect, position)
+
+    def _camera_reported(self) -> None:
+        """Fit the view once the browser has reported its canvas, and again when the canvas changes
+        shape under a camera the user has not moved."""
+        camera, framed = self._camera, self._framed
+        if camera is None:
+            return
+        try:
+            aspect = _aspect(camera)
+        except AssertionError:
+            return
+        if framed is None:
+            self.frame()
+        elif (np.linalg.norm(np.asarray(camera.position) - framed[1]) < 1e-4
+              and abs(aspect - framed[0]) > 0.02 * framed[0]):
+            self.frame()
 
     def set_step(self, step: int) -> None:
         """Pose every arm at ``step`` (clamped to each side's own length)."""

@@ -16,6 +16,7 @@ import numpy.typing as npt
 
 from ..analysis import metrics
 from ..analysis.timeline import ROLLOUT_LABELS, RolloutTimeline
+from ..analysis.video_metrics import geometry_note, resizes_whole_frame
 from ..data.session import CHAINED_KINDS
 from ..errors import InspectorError, one_line
 from ..units import JOINT_NAMES
@@ -64,7 +65,9 @@ def headline_metrics(tl: RolloutTimeline, psnr: dict[str, np.ndarray | None] | N
     rows: list[tuple[str, str]] = []
     if tl.kind == "episode":
         return episode_metrics(tl)
-    if tl.has_gt_joints:
+    if not tl.has_joints:  # video only: no joint figure (drift, limit steps) means anything
+        rows.append(("joint measures", "not measured: no predicted actions (video only)"))
+    elif tl.has_gt_joints:
         inside = ~tl.post_episode if tl.post_episode is not None else np.ones(tl.n_steps, bool)
         ta = tl.time_aligned_drift
         assert ta is not None  # set with the GT joints
@@ -84,21 +87,40 @@ def headline_metrics(tl: RolloutTimeline, psnr: dict[str, np.ndarray | None] | N
             rows.append(("end-effector error", f"mean {_fmt(np.nanmean(tl.ee_error_mm), ' mm', 0)}"))
     else:
         rows.append(("joint drift", "no GT joints (serve with --dataset to compare joints)"))
-    limits = tl.limit_summary()
-    name = f"steps past a joint limit (+{tl.limit_margin_deg:g}° margin)"
-    if limits.steps:
-
-        joints = ", ".join(j for j, n in zip(JOINT_NAMES, limits.by_joint) if n)
-        rows.append((name, f"{limits.steps} of {tl.n_steps} ({joints})"))
-    else:
-        rows.append((name, "none"))
+    if tl.has_joints:
+        limits = tl.limit_summary()
+        name = f"steps past a joint limit (+{tl.limit_margin_deg:g}° margin)"
+        if limits.steps:
+            joints = ", ".join(j for j, n in zip(JOINT_NAMES, limits.by_joint) if n)
+            rows.append((name, f"{limits.steps} of {tl.n_steps} ({joints})"))
+        else:
+            rows.append((name, "none"))
+    refused = geometry_notes(tl)
     if psnr is not None and tl.video_views():
-        means = {v: float(np.nanmean(p)) for v, p in psnr.items() if p is not None and np.isfinite(p).any()}
+        means = {v: float(np.nanmean(p)) for v, p in psnr.items()
+                 if v not in refused and p is not None and np.isfinite(p).any()}
         if means:  # per view: the front camera's figure is not averaged away by the wrist's
             rows.append(("video PSNR", ", ".join(f"{v} {m:.1f} dB" for v, m in means.items())))
-        elif loading_video:
+        elif loading_video and len(refused) < len(tl.video_views()):
             rows.append(("video PSNR", "computing…"))
+    rows += [(f"video PSNR, {view}", note) for view, note in refused.items()]
     return rows + sanity_rows(tl) + reference_rows(tl.rollout.extra) + fact_rows(tl.rollout.extra)
+
+
+def geometry_notes(tl: RolloutTimeline) -> dict[str, str]:
+    """Per view with GT video whose frames are not compared with the GT's (another geometry, e.g. a
+    mosaic of two cameras beside one camera's render): why, as the report row's ``video_psnr_note``."""
+    whole_frame = resizes_whole_frame(tl.rollout.extra)
+    notes: dict[str, str] = {}
+    for view in tl.video_views():
+        gt = tl.gt.clips.get(view)
+        try:
+            note = geometry_note(tl.rollout.video(view), gt, whole_frame) if gt is not None else None
+        except InspectorError:  # an unreadable clip says so where its frames would show
+            continue
+        if note is not None:
+            notes[view] = note
+    return notes
 
 
 def fact_rows(extra: object) -> list[tuple[str, str]]:
@@ -243,12 +265,15 @@ def video_grid(pairs: Sequence[FramePair], step: int, t_s: float,
     compare = compare or {}
     clips = clips or {}
     rows = []
+    # rows of frames: one per view, or the one view's frames stacked
+    n_rows = (2 + (pairs[0].view in compare)) if large else len(pairs)
+    frame_height = frame_height_css(n_rows)
     for p in pairs:
         cells = []
         if p.has_imagined:
             caption = "imagined · playing" if (p.view, "imagined") in clips else f"imagined · frame {p.imagined_index}"
             cells.append(_frame_cell(p.view, "imagined", p.imagined, p.status, caption, "#e8590c",
-                                     f"data-frame='{p.imagined_index}'", clips.get((p.view, "imagined"))))
+                                     f"data-frame='{p.imagined_index}'", clips.get((p.view, "imagined")), frame_height))
             gt_status = p.status if p.status != READY else (LOADING if p.gt_note == LOADING else
                                                              f"no GT frame ({p.gt_note})")
             gt_caption = "ground truth · same time"
@@ -256,13 +281,13 @@ def video_grid(pairs: Sequence[FramePair], step: int, t_s: float,
             gt_status = p.status if p.status != READY else (p.gt_note or LOADING)
             gt_caption = f"camera · frame {p.gt_index}" if p.gt_index is not None else "camera"
         cells.append(_frame_cell(p.view, "gt", p.gt, gt_status, gt_caption, "#2b8a3e", f"data-step='{step}'",
-                                 clips.get((p.view, "gt"))))
+                                 clips.get((p.view, "gt")), frame_height))
         c = compare.get(p.view)
         if c is not None:
             psnr_c = f" · PSNR {c.psnr_db:.1f} dB" if c.psnr_db is not None else ""
             cells.append(_frame_cell(p.view, "compare", c.imagined, c.status,
                                      f"{compare_tag or 'compared'} · imagined{psnr_c}", "#1c7ed6",
-                                     f"data-frame='{c.imagined_index}'", clips.get((p.view, "compare"))))
+                                     f"data-frame='{c.imagined_index}'", clips.get((p.view, "compare")), frame_height))
         if clips:  # the frame changes faster than the server says: its PSNR is shown when paused
             psnr = "PSNR on pause" if p.psnr_db is not None else ""
         else:
@@ -291,20 +316,33 @@ _FOLLOW_CLIP_CLOCK = (
     "g.querySelector('.inspector-time').textContent='t = '+(s/d.stepsPerS).toFixed(2)+' s \u00b7 step '+s+' \u00b7 playing'")
 
 
+# The frames take at most this share of the window's height, all rows together [vh]: at 900 px
+# the drift plot under them stays in view (two views' frames took 540 px, leaving ~200 px of plot).
+FRAMES_SHARE_VH = 42
+FRAME_ROW_CHROME_PX = 30  # a row's view name, caption and gap
+
+
+def frame_height_css(n_rows: int) -> str:
+    """The CSS max-height of one frame when ``n_rows`` rows of frames share the window."""
+    return f"calc({FRAMES_SHARE_VH / max(n_rows, 1):.4g}vh - {FRAME_ROW_CHROME_PX}px)"
+
+
 def _frame_cell(view: str, kind: str, src: str | None, status: str, caption: str, colour: str, data: str,
-                clip: str | None = None) -> str:
-    """One frame with its caption, a playing clip, or a grey box saying why there is none."""
+                clip: str | None = None, max_height: str = "none") -> str:
+    """One frame with its caption, a playing clip, or a grey box saying why there is none; the
+    frame keeps its aspect within ``max_height`` (centred in its cell, the margins left clear)."""
+    fit = f"width:100%;max-height:{max_height};object-fit:contain;display:block;border-radius:3px"
     if clip is not None:  # muted: browsers autoplay only muted media; canplay: autoplay may not start
         body = (f"<video class='inspector-frame' data-view='{esc(view)}' data-kind='{kind}' src='{clip}' "
                 "autoplay muted playsinline disablepictureinpicture oncanplay='this.play()' "
                 f"ontimeupdate=\"{_FOLLOW_CLIP_CLOCK}\" "
-                "style='width:100%;display:block;border-radius:3px;background:#222'></video>")
+                f"style='{fit}'></video>")
     elif src is not None:
         body = (f"<img class='inspector-frame' data-view='{esc(view)}' data-kind='{kind}' {data} src='{src}' "
-                "style='width:100%;display:block;border-radius:3px;background:#222'>")
+                f"style='{fit}'>")
     else:
         error = status != LOADING and not status.startswith("no GT frame")
-        body = (f"<div style='width:100%;aspect-ratio:320/176;display:flex;align-items:center;"
+        body = (f"<div style='width:100%;aspect-ratio:320/176;max-height:{max_height};display:flex;align-items:center;"
                 f"justify-content:center;background:#e9ecef;color:{'#c92a2a' if error else '#6b7280'};"
                 f"font-size:0.7rem;border-radius:3px;text-align:center;padding:2px'>"
                 f"{'loading…' if status == LOADING else esc(status)}</div>")

@@ -32,7 +32,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..analysis.timeline import RolloutTimeline
-from ..analysis.video_metrics import compare_clips
+from ..analysis.video_metrics import compare_clips, resizes_whole_frame
 from ..cache import DEFAULT_FRAME_CACHE_MB
 from ..data.video import fit_size
 from ..errors import InspectorError
@@ -266,7 +266,8 @@ class FrameStore(Notifying):
         def run(with_gt: bool):
             results = compare_clips(view, imagined_clips, gt_clip if with_gt else None,
                                     tl.gt_index_of_frame(view) if with_gt else (lambda f: -1),
-                                    on_imagined=imagined, on_gt=gt_frame if with_gt else None, match=False)
+                                    on_imagined=imagined, on_gt=gt_frame if with_gt else None, match=False,
+                                    whole_frame=resizes_whole_frame(tl.rollout.extra))
             return results[0] if results else None
 
         try:

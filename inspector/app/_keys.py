@@ -9,6 +9,11 @@ started a 3D redraw (~150 ms in software WebGL) before the step's frame could ev
 The slider and the hotkeys handle the key first (React listens on its root element, inside
 ``<html>``; Mantine's hotkeys on ``<html>`` itself); the page's script then stops the event at
 ``<html>``, before the document. The script rides in the panel title's HTML (see ``._page_script``).
+
+A pick in a dropdown (the rollout picker, Speed, Video, the Overview's) left the keyboard focus in
+its input, where Mantine's hotkeys ignore keys: X typed "demo / seam_jumpx" into the picker. The
+script takes the focus off a dropdown's input once an option is picked (by click or Enter), so the
+keys reach the app after any pick; text fields being edited keep their keys.
 """
 
 from __future__ import annotations
@@ -39,6 +44,10 @@ LABEL_HOTKEYS = {
 # Letters viser's keyboard camera moves by.
 CAMERA_LETTERS = frozenset("WASDQE")
 
+# What the Timeline folder says of its keys (every one of HOTKEYS).
+TIMELINE_KEYS_HINT = ("keys: J / L step · K play · PageUp / PageDown chunk · W worst chunk · "
+                      "X next flagged seam · arrows on a slider step it")
+
 _KEYS_JS = r"""
 const CLAIMED = new Set(__CLAIMED__);
 document.documentElement.addEventListener('keydown', (e) => {
@@ -46,6 +55,18 @@ document.documentElement.addEventListener('keydown', (e) => {
   const hotkey = CLAIMED.has(e.code) && !e.ctrlKey && !e.metaKey && !e.altKey;
   if (onSlider || hotkey) e.stopPropagation();
 });
+// a dropdown's input: Mantine's Select (its options listed in a listbox)
+const isDropdown = (el) => el instanceof HTMLInputElement && el.getAttribute('aria-haspopup') === 'listbox';
+const blurPicked = () => setTimeout(() => {
+  const el = document.activeElement;
+  if (isDropdown(el)) el.blur();
+}, 0);
+document.addEventListener('click', (e) => {
+  if (e.target instanceof Element && e.target.closest('[role="option"]')) blurPicked();
+}, true);
+document.documentElement.addEventListener('keydown', (e) => {
+  if (e.key === 'Enter' && isDropdown(e.target) && e.target.getAttribute('aria-expanded') === 'true') blurPicked();
+}, true);
 """
 
 

@@ -33,6 +33,7 @@ from ._overview_table import (
     MAX_TABLE_ROWS,
     NO_COMPARE,
     PICKER_ORDER,
+    SCOPE,
     Note,
     Query,
     compare_with_session,
@@ -45,14 +46,23 @@ from ._overview_table import (
     sort_options,
     table_html,
 )
+from ._panels import LEFT_PANEL_PX
 
 # Rows arriving redraw a tab's table at most this often, its figures less often (a thousand
 # rollouts' figures are most of a megabyte of SVG for the browser to lay out) [s].
 REDRAW_EVERY_S = 1.0
 FIGURES_EVERY_S = 5.0
-# The floating panel, over the scene (the right panel steps aside): it fills a 1600 x 1000 window
-# beside the left panel; the user may move and resize it [px].
-PANEL_X, PANEL_Y, PANEL_WIDTH, PANEL_HEIGHT = 8, 8, 1226, 965
+# The floating panel, over the scene (the right panel steps aside), beside the left panel; the user
+# may move and resize it [px]. viser sizes a floating panel in pixels and keeps only its height
+# inside the window, so the page's style caps its width at what the window leaves beside the left
+# panel: it fills a 1920 px window and fits a 1280 px one, its table scrolling sideways in its box.
+PANEL_X, PANEL_Y, PANEL_WIDTH, PANEL_HEIGHT = 8, 8, 1600, 1100
+# viser draws the left panel 4 px wider than the width set (its padding) [px]
+LEFT_DOCK_PX = LEFT_PANEL_PX + 4
+FIT_WINDOW_CSS = (
+    f"<style>[data-floating-window]:has(.{SCOPE}) {{"
+    f"max-width: calc(100% - {LEFT_DOCK_PX + 2 * PANEL_X}px) !important;"
+    f"max-height: calc(100% - {2 * PANEL_Y}px) !important; }}</style>")
 NO_ROWS = "(no rows)"
 
 
@@ -101,7 +111,7 @@ class OverviewPanel:
                 self.close = gui.add_button("Close overview", icon="x", color="gray")
             self.panel = gui.add_panel(visible=False)
             with self.panel.add_tab("Overview", icon="table"):
-                self.style = gui.add_html(overview_css())
+                self.style = gui.add_html(overview_css() + FIT_WINDOW_CSS)
                 self.header = gui.add_html("")
                 self.compare_info = gui.add_html("", visible=False)
                 self.table = gui.add_html("")

@@ -23,6 +23,7 @@ from ..report.compare import compare_reports
 from ..report.figures import report_figures
 from ..report.html import KIND_LABELS, figure_html
 from ..report.rows import limit_steps
+from ..report.significance import verdict_parts
 from ._overview_rows import OverviewRow
 
 SCOPE = "inspector-overview"  # the class of the overview's elements; its styles apply under it
@@ -266,9 +267,8 @@ def comparison_html(c: Comparison) -> str:
         lines.append(f"time-aligned drift: A better in {d['a_better']}, B better in {d['b_better']}, "
                      f"ties {d['ties']}; mean Δ {num(d['mean_delta_deg'], '+.2f')} deg")
     for t in c.result.get("tests", []):  # is each difference real (inspector.report.significance)
-        lo, hi = t["ci95"]
-        lines.append(f"{escape(t['metric'])}: <b>{escape(t['verdict'])}</b> at 95% (B − A {t['mean_diff']:+.3g}, "
-                     f"interval [{lo:+.3g}, {hi:+.3g}], {escape(t['test'].split(';')[0])} p {num(t['p'], '.3g')})")
+        metric, verdict, detail = verdict_parts(t)
+        lines.append(f"{escape(metric)}: <b>{escape(verdict)}</b> at 95%: {escape(detail)}")
     unpaired = [f"{len(c.result[f'unmatched_{side}'])} of {side.upper()}" for side in ("a", "b")
                 if c.result[f"unmatched_{side}"]]
     if unpaired:
@@ -425,8 +425,8 @@ def table_html(rows: Sequence[OverviewRow], shown: Sequence[OverviewRow], notes:
     cols = _columns(views, notes, comparison, len({r.session for r in rows}) > 1,
                     outcomes=any(outcome_of(r) is not None for r in rows),
                     with_outcomes=any(effective_of(r, notes) is not None for r in rows))
-    head = "".join(f"<th title='{escape(c.tip)}'{' class=num' if c.numeric else ''}>{escape(c.header)}</th>"
-                   for c in cols)
+    head = "".join(f"<th title='{escape(c.tip)}' data-col='{escape(c.css or c.header)}'"
+                   f"{' class=num' if c.numeric else ''}>{escape(c.header)}</th>" for c in cols)
     body = []
     # a row without metrics: its text columns, then one cell across the rest (the error, or
     # that it is computing)
@@ -489,6 +489,8 @@ def figures_html(shown: Sequence[OverviewRow]) -> str:
 # Styles
 
 
+# The table scrolls inside its own box (both ways); its rollout column stays in place when it
+# scrolls sideways, so a row is still named in a window too narrow for every column.
 _LAYOUT_CSS = """
 .ov-head { font-size: 13px; color: #343a40; padding: 2px 2px 6px; }
 .ov-head .busy { color: #e67700; } .ov-head .bad { color: #c92a2a; }
@@ -508,6 +510,10 @@ _LAYOUT_CSS = """
 .ov-table tr.error td.msg { color: #c92a2a; font-style: normal; }
 .ov-table tr.open td { background: #fff4e6; }
 .ov-table td[data-col=flag] { color: #e8590c; }
+.ov-table td[data-col=tag], .ov-table th[data-col=tag] { position: sticky; left: 0; background: #fff; box-shadow: 1px 0 0 #dee2e6; }
+.ov-table td[data-col=tag] { z-index: 1; }
+.ov-table th[data-col=tag] { z-index: 2; background: #f4f5f7; }
+.ov-table tr.open td[data-col=tag] { background: #fff4e6; }
 .ov-more { font-size: 12px; color: #6b7280; padding: 4px 2px; }
 .ov-figure-grid { display: grid; grid-template-columns: repeat(2, minmax(0, 1fr)); gap: 14px 22px; margin-top: 8px; }
 .ov-figure-grid figure { margin: 0; }

@@ -18,17 +18,24 @@ from ..analysis.video_action import FROZEN, NO_MATCH, VideoAction
 from ..units import JOINT_NAMES
 from ._cards import unit
 from ._clip_clock import CLIP_CLOCK_HTML, CLIP_CLOCK_LABEL
-from ._keys import KEYS_HTML
+from ._keys import KEYS_HTML, TIMELINE_KEYS_HINT
 from ._label_ids import LABEL_IDS_HTML
 from ._light_3d import LIGHT_3D_HINT, LIGHT_3D_HTML, LIGHT_3D_LABEL
+from ._page_chrome import WEBGL_NOTICE_HTML, page_title_html
 from ._plots import CursorPlot, Line, Mark
 from ._video_only import is_video_only, panel_note
 
 SPEEDS = ("0.25x", "0.5x", "1x", "2x", "4x")
+# The docked panels' widths; the 3D scene fills the rest [px].
+LEFT_PANEL_PX, RIGHT_PANEL_PX = 350, 640
 NO_COMPARE = "— none —"
 PRED_HEX, GT_HEX, CMP_HEX = "#f08c00", "#2b8a3e", "#1c7ed6"
 BM_HEX, DTW_HEX, LIMIT_HEX = "#7048e8", "#868e96", "#e03131"
 JOINT_HEX = ("#1c7ed6", "#2b8a3e", "#f08c00", "#ae3ec9", "#0ca678", "#e03131")
+
+
+PICKER_LABEL = "Rollout"
+PAGE_TITLE_HTML = page_title_html(PICKER_LABEL)  # the app and what is open
 
 
 class ControlPanel:
@@ -41,10 +48,11 @@ class ControlPanel:
         options = list(self.option_to_key) or ["(no rollouts)"]
         # data-inspector-client lets a test find the server-side tab of a page.
         gui.add_html(f"<div data-inspector-client='{int(client_id)}' style='font-weight:600;"
-                     f"font-size:0.95rem;padding:0 0.2rem'>SO-101 rollout inspector{LABEL_IDS_HTML}{LIGHT_3D_HTML}{KEYS_HTML}{CLIP_CLOCK_HTML}</div>")
+                     f"font-size:0.95rem;padding:0 0.2rem'>SO-101 rollout inspector{LABEL_IDS_HTML}{LIGHT_3D_HTML}{KEYS_HTML}"
+                     f"{CLIP_CLOCK_HTML}{PAGE_TITLE_HTML}{WEBGL_NOTICE_HTML}</div>")
         # the whole evaluation in one table (see ._overview, which wires it)
         self.show_overview = gui.add_button("Overview", icon="table", hint="Every served rollout in one table")
-        self.picker = gui.add_dropdown("Rollout", options, initial_value=options[0])
+        self.picker = gui.add_dropdown(PICKER_LABEL, options, initial_value=options[0])
         self.error = gui.add_html("", visible=False)
         self.card = gui.add_html("")
         with gui.add_folder("Timeline") as self.timeline_folder:
@@ -55,8 +63,7 @@ class ControlPanel:
             self.play = gui.add_button("Play", icon="player-play")
             self.speed = gui.add_dropdown("Speed", SPEEDS, initial_value="1x")
             self.nav = gui.add_button_group("Go to chunk", ("◀ prev", "next ▶", "worst"))
-            gui.add_html("<div style='font-size:0.7rem;color:#6b7280;padding:0 0.2rem'>keys: J / L step · "
-                         "K play · PageUp / PageDown chunk · W worst chunk</div>")
+            gui.add_html(f"<div style='font-size:0.7rem;color:#6b7280;padding:0 0.2rem'>{TIMELINE_KEYS_HINT}</div>")
         with gui.add_folder("Compare", expand_by_default=False):
             self.compare = gui.add_dropdown("Compare with", [NO_COMPARE, *keys], initial_value=NO_COMPARE)
             self.compare_info = gui.add_html("")

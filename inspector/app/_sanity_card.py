@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from ..analysis.sanity import sanity_measures
 from ..analysis.timeline import RolloutTimeline
+from ..data.session import CHAINED_KINDS
 
 
 def sanity_rows(tl: RolloutTimeline) -> list[tuple[str, str]]:
@@ -17,6 +18,8 @@ def sanity_rows(tl: RolloutTimeline) -> list[tuple[str, str]]:
         flagged = ", ".join(map(str, seams["flagged"])) or "none"
         rows.append(("chunk seams flagged", f"{flagged}" + (f" · worst {worst['jump_deg']:.1f}° at chunk {worst['chunk']}"
                                                             if worst else "")))
+    elif tl.kind in CHAINED_KINDS and not tl.has_joints:
+        rows.append(("chunk seams", "not measured: no predicted actions (video only)"))
     c = m["completion"]
     if c is not None:
         if c["time_s"] is None:
@@ -27,8 +30,9 @@ def sanity_rows(tl: RolloutTimeline) -> list[tuple[str, str]]:
     j = m["joint_coherence"]
     if j is not None and j["coupling_error_deg"]:
         phase = ", ".join(f"{k} {j['phase_offset_steps'][k]:+d} steps" for k in j["out_of_phase"]) or "none"
+        undetermined = ", ".join(j["phase_undetermined"])
         rows.append(("joint coherence", f"coupling worst {max(j['coupling_error_deg'].values()):.2f}° · "
-                                        f"out of phase: {phase}"))
+                                        f"out of phase: {phase}" + (f" · lag not determined: {undetermined}" if undetermined else "")))
     if m["video_break"]:
         rows.append(("video break", ", ".join(f"{v} {'holds' if b is None else f'chunk {b}'}"
                                               for v, b in sorted(m["video_break"].items()))))

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from pathlib import Path
 
+from .._signals import note_stop_request, stop_requested
 from ..analysis.measure_settings import DEFAULT_MEASURES, MeasureSettings
 from ..cache import DEFAULT_FRAME_CACHE_MB, MetricsCache
 from ..data.session import is_session
@@ -252,7 +253,7 @@ def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", po
     restore_sigterm = _stop_on_sigterm()
     try:
         _announce(app, share)
-        while True:
+        while not stop_requested():  # a SIGTERM whose exception was lost while starting
             # Short sleeps: a signal the kernel hands to another thread interrupts no sleep here,
             # and Python runs its handler only when this thread next wakes.
             time.sleep(1.0)
@@ -279,6 +280,7 @@ def _stop_on_sigterm():
         return lambda: None
 
     def interrupt(signum, frame):
+        note_stop_request()
         raise KeyboardInterrupt
 
     previous = signal.signal(signal.SIGTERM, interrupt)

@@ -47,14 +47,13 @@ from ._keys import HOTKEYS
 from ._label_panel import LabelPanel
 from ._light_3d import apply_light_3d
 from ._overview import OverviewPanel
-from ._panels import NO_COMPARE, ControlPanel, PlotPanel, VideoPanel
+from ._panels import LEFT_PANEL_PX, NO_COMPARE, RIGHT_PANEL_PX, ControlPanel, PlotPanel, VideoPanel
 from ._playback_clip import CLIP_STEPS, encode_clip
 from ._sanity_card import flagged_seam_steps, sanity_marks, slider_marks
 from ._scene import TabScene
 from ._video_only import is_video_only
 
 PLAYBACK_FPS = 30.0
-LEFT_PANEL_PX, RIGHT_PANEL_PX = 350, 640
 NOTES_NEED_A_SESSION = ("<div style='font-size:0.75rem;color:#6b7280'>Notes are kept in a session's "
                         "annotations.json; a dataset's episodes have none (the dataset is never written to)."
                         "</div>")
@@ -694,7 +693,9 @@ class TabState:
         try:
             from ..export.recording import write_recording  # deferred: rerun takes ~0.6 s to import
         except ImportError as exc:
-            self._notify("Export unavailable", f"inspector.export.recording could not be imported ({exc}).", color="red")
+            hint = " Install it: pip install 'inspector[export]'." if getattr(exc, "name", "") == "rerun" else ""
+            self._notify("Export unavailable", f"inspector.export.recording could not be imported ({exc}).{hint}",
+                         color="red")
             return None
         tag = loaded.timeline.tag
         note = self.client.add_notification("Exporting", f"{tag}.rrd …", loading=True, with_close_button=False)

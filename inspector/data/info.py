@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InspectorError
-from .importers import dreamzero_offline, dreamzero_served, lerobot_eval
+from .importers import dreamzero_offline, dreamzero_served, dreamzero_so101_info, lerobot_eval
 from .importers.groot_dreams import LAYOUT as GROOT_DREAMS
 from .importers.groot_dreams import NeuralTrajectories, describe_layout, format_layout, is_groot_dreams
 from .lerobot_dataset import INFO_PATH, LeRobotDataset, is_lerobot_dataset
@@ -52,13 +52,17 @@ def describe(path: Path, calibration: str | None = None) -> dict[str, Any]:
         return lerobot_eval.describe(path)
     if dreamzero_served.is_served(path):
         return dreamzero_served.describe(path)
+    if dreamzero_so101_info.is_dreamzero_so101(path):
+        return dreamzero_so101_info.describe(path)
     raise no_layout_fits(path)
 
 
 def _rollout_info(r: Any) -> dict[str, Any]:
+    notes = r.extra.get("source_notes") if isinstance(r.extra, dict) else None  # what its importer said
     return {"tag": r.tag, "kind": r.kind, "n_chunks": r.n_chunks, "horizon": r.horizon,
             "executed_per_chunk": r.executed_per_chunk, "views": list(r.views),
-            "has_gt_joints": r.has_gt_joints or _dataset_has_episode(r), "video_only": not r.has_joints}
+            "has_gt_joints": r.has_gt_joints or _dataset_has_episode(r), "video_only": not r.has_joints,
+            **({"warnings": [str(n) for n in notes]} if isinstance(notes, list) and notes else {})}
 
 
 def _dataset_has_episode(r: Any) -> bool:
@@ -76,6 +80,8 @@ def format_info(info: dict[str, Any]) -> str:
         return dreamzero_served.format_description(info)
     if info["format"] == lerobot_eval.FORMAT:
         return lerobot_eval.format_description(info)
+    if info["format"] == dreamzero_so101_info.FORMAT:
+        return dreamzero_so101_info.format_description(info)
     if info["format"] == "lerobot":
         lines = [f"LeRobot dataset {info['codebase_version']}, {info['robot_type']}, {info['fps']} fps, "
                  f"cameras: {', '.join(info['cameras']) or 'none'}",
@@ -97,6 +103,7 @@ def format_info(info: dict[str, Any]) -> str:
         lines.append(f"{r['tag']:<{width}} {r['kind']:<16} {r['n_chunks']:>6} {r['horizon']:>7} "
                      f"{executed:>4}  {'yes' if r['has_gt_joints'] else 'no':<9}  "
                      f"{', '.join(r['views'])}{'  (video only: no joints)' if r.get('video_only') else ''}")
+        lines += [f"{'':<{width}} warning: {w}" for w in r.get("warnings", [])]
     for tag, err in info.get("errors", {}).items():
         lines.append(f"{tag:<{width}} error: {err}")
     return "\n".join(lines)

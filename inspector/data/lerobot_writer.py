@@ -22,7 +22,6 @@ Usage::
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import uuid
@@ -34,6 +33,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import InspectorError
+from ..schema import json_text
 from ..units import JOINT_NAMES, Units
 from .lerobot_dataset import (
     ACTION_KEY,
@@ -279,7 +279,7 @@ def _write_data(path: Path, episodes: list[EpisodeData], starts: npt.NDArray[np.
     schema = pa.schema([(ACTION_KEY, joints_type), (STATE_KEY, joints_type), (TIMESTAMP_KEY, pa.float32()),
                         (FRAME_INDEX_KEY, pa.int64()), (EPISODE_INDEX_KEY, pa.int64()),
                         (INDEX_KEY, pa.int64()), (TASK_INDEX_KEY, pa.int64()), *extra.items()],
-                       metadata={"huggingface": json.dumps({"info": {"features": _HF_FEATURES}})})
+                       metadata={"huggingface": json_text({"info": {"features": _HF_FEATURES}})})
     path.parent.mkdir(parents=True, exist_ok=True)
     with pq.ParquetWriter(path, schema) as writer:
         for e, ep in enumerate(episodes):
@@ -360,7 +360,7 @@ def _write_tasks(path: Path, tasks: list[str]) -> None:
         "creator": {"library": "pyarrow", "version": pa.__version__},
     }
     schema = pa.schema([(TASK_INDEX_KEY, pa.int64()), ("__index_level_0__", pa.large_string())],
-                       metadata={"pandas": json.dumps(pandas_meta)})
+                       metadata={"pandas": json_text(pandas_meta)})
     table = pa.table({TASK_INDEX_KEY: list(range(len(tasks))), "__index_level_0__": tasks}, schema=schema)
     pq.write_table(table, path)
 
@@ -442,7 +442,7 @@ def _aggregate_stats(per_episode: list[dict[str, dict[str, Any]]]) -> dict[str, 
 
 def _write_json(path: Path, obj: Any) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(obj, indent=4) + "\n")
+    path.write_text(json_text(obj, indent=4) + "\n")
 
 
 def _replace_dir(new: Path, root: Path) -> None:

@@ -48,9 +48,9 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from .._files import mkdtemp_sibling, mkstemp_sibling, short_name
+from .._files import mkdtemp_sibling, mkstemp_sibling, read_regular_file, short_name
 from ..errors import InspectorError, require
-from ..schema import shown, whole_number
+from ..schema import json_text, shown, whole_number
 from ..units import JOINT_NAMES, Units, parse_units
 from .video import VideoClip, encode_h264, probe
 
@@ -86,9 +86,11 @@ ABSURD_VALUE = 1e100
 # them step times and video timestamps overflow or collapse (1e308 fps, 1e-300 fps) [frames/s].
 MIN_FPS = 0.001
 MAX_FPS = 1000.0
-# A video-only rollout's length comes from rollout.json alone (no array to bound it): a day at
-# 100 steps per second is more than any evaluation runs [steps].
-MAX_VIDEO_ONLY_STEPS = 10_000_000
+# A video-only rollout's length comes from rollout.json alone (no array to bound it). Its timeline
+# still holds per-step arrays (~350 bytes a step): 1,000,000 steps (over 18 hours at 15 Hz) take
+# report, compare and export 0.4 GB and 4-13 s (benchmarks/hostile_memory.py); 10,000,000 passed
+# 3 GB [steps].
+MAX_VIDEO_ONLY_STEPS = 1_000_000
 
 
 # The largest JSON document read whole (metadata: session.json, rollout.json, info.json, ...; none
@@ -227,6 +229,8 @@ class Session:
     # where its outcomes live when not in the session directory: a raw directory imported in
     # memory keeps them in a sidecar beside it (inspector.outcomes.sidecar_path)
     outcomes_file: Path | None = None
+    # likewise its cameras (cameras.json; inspector.data.cameras reads and writes them)
+    cameras_file: Path | None = None
 
     @property
     def dataset_root(self) -> Path | None:
@@ -264,15 +268,10 @@ def read_json_bytes(path: Path) -> bytes:
     """The bytes of a JSON file :func:`read_json` would parse (the same checks before reading).
 
     Raises:
-        InspectorError: missing, not a regular file, too large or unreadable.
+        InspectorError: missing, not a regular file (a FIFO is never waited on, a device never
+            read), too large or unreadable.
     """
-    if not path.is_file():
-        raise InspectorError(path, "is a directory, not a file" if path.is_dir() else "file not found")
-    check_json_size(path)
-    try:
-        return path.read_bytes()
-    except OSError as exc:
-        raise InspectorError(path, f"cannot read ({exc.strerror or exc})") from None
+    return read_regular_file(path, MAX_JSON_BYTES, "metadata file")
 
 
 def parse_json(path: Path, raw: bytes) -> Any:
@@ -282,13 +281,25 @@ def parse_json(path: Path, raw: bytes) -> Any:
         InspectorError: not UTF-8, not JSON, nested past the parser's depth, an integer past
             Python's digit limit, or a non-finite number.
     """
+    return parse_json_text(path, raw)
+
+
+def parse_json_text(path: Path, text: str | bytes, where: str = "") -> Any:
+    """:func:`parse_json` of one JSON text inside ``path`` (``where`` it is, e.g. ``"line 12"`` of a
+    JSON-lines file, starts every error).
+
+    Raises:
+        InspectorError: not UTF-8, not JSON, nested past the parser's depth, an integer past
+            Python's digit limit, or a non-finite number (naming its field).
+    """
+    at = f"{where}: " if where else ""
     try:
-        data = json.loads(raw)
+        data = json.loads(text)
     except (ValueError, RecursionError) as exc:  # bad UTF-8, bad JSON, an int of 5000 digits, [[[[...
-        raise InspectorError(path, f"invalid JSON ({type(exc).__name__}: {exc})") from None
+        raise InspectorError(path, f"{at}invalid JSON ({type(exc).__name__}: {exc})") from None
     found = _first_non_finite(data)
     if found is not None:
-        raise InspectorError(path, f"{found[0]}: non-finite number {found[1]} (JSON has no NaN or Infinity)")
+        raise InspectorError(path, f"{at}{found[0]}: non-finite number {found[1]} (JSON has no NaN or Infinity)")
     return data
 
 
@@ -508,7 +519,7 @@ def load_rollout(root: str | Path, units: Units | None = None, lazy: bool = Fals
         n_video_chunks = whole_number(get("n_chunks", int), meta_path, "n_chunks", minimum=1)
         require(n_video_chunks * horizon <= MAX_VIDEO_ONLY_STEPS, meta_path,
                 f"n_chunks: {n_video_chunks} chunks of {horizon} steps: more than the "
-                f"{MAX_VIDEO_ONLY_STEPS:,} steps any recorded rollout runs")
+                f"{MAX_VIDEO_ONLY_STEPS:,} steps a video-only rollout may run")
         arrays["actions"] = NoJoints((n_video_chunks, horizon, len(JOINT_NAMES)))
     else:
         arrays["actions"] = NpyFile(root / ACTIONS_FILE, ("n_chunks", horizon, len(JOINT_NAMES)))
@@ -687,7 +698,7 @@ def _type_names(kind: type | tuple[type, ...]) -> str:
 
 def write_json_atomic(path: Path, data: Any) -> None:
     """Write JSON so that the file is either the old one or the complete new one."""
-    write_bytes_atomic(path, (json.dumps(data, indent=2, allow_nan=False) + "\n").encode())
+    write_bytes_atomic(path, (json_text(data, indent=2) + "\n").encode())
 
 
 def write_bytes_atomic(path: Path, raw: bytes) -> None:

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from ..cache import record_import_sources
 from ..errors import InspectorError
+from .cameras import sidecar_path as cameras_sidecar
 from .importers import dreamzero_offline, dreamzero_served, lerobot_eval
 from .importers.dreamzero_so101 import find_sources, load_in_memory
 from .importers.groot_dreams import LAYOUT_HINT as GROOT_DREAMS_HINT
@@ -137,6 +138,7 @@ def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine
         session = opened(session_path)
         record_import_sources(session, path, dataset)  # its cache entries are keyed by the source's files
         session.outcomes_file = path.resolve().parent / f"{path.resolve().name}{OUTCOMES_SIDECAR_SUFFIX}"
+        session.cameras_file = cameras_sidecar(path)
         session.errors.update(errors)
         out.roots.append(Path(handle.name))
     if dataset is not None and session.dataset_root is None:
@@ -165,7 +167,7 @@ def _import_raw(path: Path, dataset: str | Path | None
         find_sources(path)  # raises a clear error when there is nothing to import
     except InspectorError:
         raise no_layout_fits(path) from None
-    return (*load_in_memory(path, dataset=dataset), {})
+    return load_in_memory(path, dataset=dataset)
 
 
 def no_layout_fits(path: Path) -> InspectorError:

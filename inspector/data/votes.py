@@ -166,9 +166,28 @@ def save_vote(vote: Vote) -> None:
 
 
 def merged_votes(session_roots: Sequence[str | Path]) -> list[Vote]:
-    """Every vote kept in any of the sessions, each once (by id), in time order."""
+    """Every vote kept in any of the sessions, each once (by id), in time order.
+
+    Raises:
+        InspectorError: a session's ``votes.json`` is not votes JSON (the first such file).
+    """
+    votes, broken = readable_votes(session_roots)
+    if broken:
+        raise next(iter(broken.values()))
+    return votes
+
+
+def readable_votes(session_roots: Sequence[str | Path]) -> tuple[list[Vote], dict[int, InspectorError]]:
+    """:func:`merged_votes` of the sessions whose file reads, and the error of each that does not
+    (by its index in ``session_roots``): one broken file leaves the others' votes counted."""
     seen: dict[str, Vote] = {}
-    for root in session_roots:
-        for vote in read_votes(root):
+    broken: dict[int, InspectorError] = {}
+    for i, root in enumerate(session_roots):
+        try:
+            votes = read_votes(root)
+        except InspectorError as exc:
+            broken[i] = exc
+            continue
+        for vote in votes:
             seen.setdefault(vote.id, vote)
-    return sorted(seen.values(), key=lambda v: (v.time, v.id))
+    return sorted(seen.values(), key=lambda v: (v.time, v.id)), broken

@@ -70,6 +70,7 @@ def rebuild_demo(out: Path | None = None, quick: bool = False, log: Callable[[st
     Returns:
         The session directory.
     """
+    from .cameras import write_scene_cameras
     from .scene import DemoScene, default_layouts, pick_motion, place_in_bowl_motion  # deferred: MuJoCo
 
     started = time.perf_counter()
@@ -83,13 +84,16 @@ def rebuild_demo(out: Path | None = None, quick: bool = False, log: Callable[[st
     scripts = [("Pick the red cube", "pick", pick_motion),
                ("Pick the red cube and place it in the bowl", "place_in_bowl", place_in_bowl_motion)]
     episodes: list[_Episode] = []
+    log(f"rendering {len(scripts)} GT episodes, then the rollouts' imagined video (MuJoCo offscreen; "
+        f"{'a few seconds' if quick else 'about 10-15 min of CPU in all'})")
     for task, layout_name, motion in scripts:
         layout = layouts[layout_name]
         gt_scene.reset(layout)
         waypoints = _speed_up(motion(gt_scene, layout), speed)
         sim = gt_scene.simulate_episode(waypoints, fps=FPS, layout=layout)
         episodes.append(_Episode(task, sim.action, sim.state, sim.frames, sim.object_poses))
-        log(f"episode {len(episodes) - 1}: {task!r}, {len(sim)} frames ({len(sim) / FPS:.1f} s)")
+        log(f"episode {len(episodes) - 1}: {task!r}, {len(sim)} frames ({len(sim) / FPS:.1f} s) "
+            f"[{_clock(time.perf_counter() - started)} elapsed]")
 
     with SessionWriter.create(out, name="demo", units=Units("degrees"), dataset=DATASET_DIR,
                               model={"name": "scripted demo model", "checkpoint": "planted faults"},
@@ -98,14 +102,14 @@ def rebuild_demo(out: Path | None = None, quick: bool = False, log: Callable[[st
         write_lerobot_dataset(writer.root / DATASET_DIR,
                               [EpisodeData(e.task, e.state, e.action, e.frames) for e in episodes],
                               fps=int(FPS), units=Units("degrees"))  # LeRobot writes a whole fps
+        write_scene_cameras(gt_scene, writer.root)  # the exact cameras: the overlays' ground truth
         train_frames: dict[str, npt.NDArray[np.uint8]] = {}
-        for spec in _rollout_specs(episodes, rng, quick):
+        specs = _rollout_specs(episodes, rng, quick)
+        eta = RenderEstimate(sum(spec.shown_frames() for spec in specs))
+        for spec in specs:
             ep = episodes[spec.episode]
-            executed, chunks, path_time = spec.build(ep.action, rng)
-            # A single chunk's video shows its executed steps, one frame each, as frames_per_chunk
-            # says (a real sample's 9 frames): frames of the unexecuted tail would be read as later
-            # chunks' frames, held at the last step.
-            shown = len(executed) if spec.kind == "autoregressive" else EXECUTED
+            executed, chunks, path_time = spec.build(ep.action, rng)  # in turn with _imagine: one seeded stream
+            shown = spec.shown_frames()
             frames = _imagine(imagined_scene, layouts, scripts[spec.episode][1], ep, executed[:shown],
                               path_time[:shown], rng)
             states = np.concatenate([executed[:1], chunks[:, EXECUTED - 1]]) if spec.kind == "autoregressive" else None
@@ -113,7 +117,7 @@ def rebuild_demo(out: Path | None = None, quick: bool = False, log: Callable[[st
                                episode_index=spec.episode, start_frame=spec.start, fps=FPS,
                                executed_per_chunk=EXECUTED, frames_per_chunk=EXECUTED,
                                videos=frames, extra={"planted_fault": spec.fault})
-            log(f"rollout {spec.tag}: {spec.fault}")
+            log(f"rollout {spec.tag}: {spec.fault} {eta.done(shown)}")
             if spec.tag == "prompt_train":
                 _write_video_ahead(writer, spec, chunks, states, frames, log)
                 train_frames = frames
@@ -122,6 +126,24 @@ def rebuild_demo(out: Path | None = None, quick: bool = False, log: Callable[[st
     size_mb = sum(f.stat().st_size for f in out.rglob("*") if f.is_file()) / 1e6
     log(f"demo session {out}: {size_mb:.1f} MB in {time.perf_counter() - started:.0f} s")
     return out
+
+
+def _clock(seconds: float) -> str:
+    return f"{int(seconds) // 60}:{int(seconds) % 60:02d}"
+
+
+class RenderEstimate:
+    """``[k/N frames, m:ss elapsed, ~m:ss left]`` for the rollouts' imagined video: the time left is
+    the frames left at the rate measured so far (the frames of one rollout cost about the same)."""
+
+    def __init__(self, total_frames: int) -> None:
+        self.total, self.rendered, self.started = total_frames, 0, time.perf_counter()
+
+    def done(self, frames: int) -> str:
+        self.rendered += frames
+        elapsed = time.perf_counter() - self.started
+        left = elapsed / max(self.rendered, 1) * (self.total - self.rendered)
+        return f"[{self.rendered}/{self.total} frames, {_clock(elapsed)} elapsed, ~{_clock(left)} left]"
 
 
 def _write_video_ahead(writer: SessionWriter, spec: _Spec, chunks: npt.NDArray[np.float64],
@@ -267,6 +289,12 @@ class _Spec:
     tempo: float = 1.0
     offset: Callable[[npt.NDArray[np.integer]], npt.NDArray[np.float64]] | None = None  # (T,) step -> (T, 6)
     horizon_error: float = 0.0  # deg at the last horizon step (single chunks)
+
+    def shown_frames(self) -> int:
+        """Frames of imagined video: every executed step of an autoregressive rollout; a single
+        chunk's executed steps, one frame each, as frames_per_chunk says (a real sample's 9
+        frames): frames of the unexecuted tail would be read as later chunks' frames."""
+        return -(-self.n_steps // EXECUTED) * EXECUTED if self.kind == "autoregressive" else EXECUTED
 
     def build(self, gt: npt.NDArray[np.float64], rng: np.random.Generator):
         """(executed (T, 6), chunks (N, H, 6), path time (T,) [GT frame]) for this rollout."""

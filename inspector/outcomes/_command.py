@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..data.sources import open_sources
 from ..errors import InspectorError
-from ._import_file import FileRow, match_rows, read_outcome_file
+from ._import_file import FileRow, iter_outcome_file, match_rows
 from ._store import known_failure_tags, outcomes_path, read_outcomes, store_records
 
 
@@ -18,7 +18,8 @@ class Imported:
     store: Path  # the outcomes file written (a session's outcomes.json or a raw directory's sidecar)
     rows: int
     rollouts: int
-    unmatched: list[FileRow]
+    unmatched: list[FileRow]  # the first rows that match no rollout (MAX_UNMATCHED_LISTED)
+    unmatched_rows: int = 0  # all of them
 
 
 def import_outcomes(file: str | Path, path: str | Path, add_tags: Sequence[str] = ()) -> Imported:
@@ -36,10 +37,10 @@ def import_outcomes(file: str | Path, path: str | Path, add_tags: Sequence[str] 
         session = sources.sessions[0]
         store = outcomes_path(session)
         known = (*known_failure_tags(read_outcomes(store)), *add_tags)
-        rows = read_outcome_file(file, known)
-        result = match_rows(rows, session.rollouts)
+        result = match_rows(iter_outcome_file(file, known), session.rollouts)  # streamed: see match_rows
         if not result.matched:
-            first = rows[0]
+            first = result.first
+            assert first is not None  # a file without rows is refused as it is read
             raise InspectorError(file, f"no row matches a rollout of {path} (line {first.line}: {first.names()}; "
                                        f"rollouts: {', '.join(sorted(session.rollouts)[:5])}"
                                        f"{', ...' if len(session.rollouts) > 5 else ''})")
@@ -47,6 +48,7 @@ def import_outcomes(file: str | Path, path: str | Path, add_tags: Sequence[str] 
             store_records(store, result.matched, source="file", set_by=Path(file).name, add_tags=add_tags)
         except ValueError as exc:
             raise InspectorError(store, str(exc)) from None
-        return Imported(store, len(rows) - len(result.unmatched), len(result.matched), result.unmatched)
+        return Imported(store, result.rows - result.unmatched_rows, len(result.matched), result.unmatched,
+                        result.unmatched_rows)
     finally:
         sources.close()

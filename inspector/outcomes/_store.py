@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any, cast
 from .._files import exclusive_lock
 from ..data.session import OUTCOMES_FILE, OUTCOMES_SIDECAR_SUFFIX, parse_json, read_json_bytes, write_bytes_atomic
 from ..errors import InspectorError
-from ..schema import mismatch, shown
+from ..schema import json_text, mismatch, shown
 from ._record import (
     FAILURE_TAGS,
     FIELDS,
@@ -116,9 +116,9 @@ def encode_document(document: Mapping[str, Any]) -> bytes:
     """The file's text: one rollout a line (easy to read and to diff), each line written by the
     json module's C encoder (an indented document goes through its pure-Python one, ~20 times
     slower: 0.1 s for 1,000 labelled rollouts)."""
-    head = [f"  {json.dumps(k)}: {json.dumps(v, allow_nan=False)}" for k, v in document.items() if k != "rollouts"]
+    head = [f"  {json_text(k)}: {json_text(v)}" for k, v in document.items() if k != "rollouts"]
     rollouts = document.get("rollouts", {})
-    lines = ",\n".join(f"    {json.dumps(tag)}: {json.dumps(by_source, allow_nan=False)}"
+    lines = ",\n".join(f"    {json_text(tag)}: {json_text(by_source)}"
                         for tag, by_source in rollouts.items())
     head.append('  "rollouts": {' + (f"\n{lines}\n  }}" if rollouts else "}"))
     return ("{\n" + ",\n".join(head) + "\n}\n").encode()

@@ -107,6 +107,12 @@ def _check_common(imagined: Mapping[tuple[str, str], Any], real: Mapping[tuple[s
                                                   f"real: {sorted(tasks[1])})")
 
 
+def measured_coverage_note(s: dict[str, Any]) -> str:
+    """Beside an interval, its coverage as simulated, not as claimed (docs/ranking.md)."""
+    coverage = s.get("measured_coverage")
+    return "" if coverage is None else f"  (held the truth in >= {coverage:.0%} of simulated evaluations)"
+
+
 _NAMES = {"pearson": "Pearson r", "spearman": "Spearman rho", "kendall": "Kendall tau", "mmrv": "MMRV",
           "mean_abs_difference": "mean |imagined - real|"}
 
@@ -114,13 +120,15 @@ _NAMES = {"pearson": "Pearson r", "spearman": "Spearman rho", "kendall": "Kendal
 def format_agreement(result: dict[str, Any]) -> str:
     what = "success rate" if result["by"] == "success" else "mean progress"
     lines = [f"{len(result['points'])} checkpoint-task points, {what} imagined vs real "
-             f"({result['confidence']:.0%} bootstrap intervals over rollouts)"]
+             f"({result['confidence']:.0%} bootstrap intervals over rollouts, nominal; their measured coverage "
+             "beside them, docs/ranking.md)"]
     for name in STATISTICS:
         s = result["statistics"][name]
         if s["value"] is None:
             lines.append(f"  {_NAMES[name]:<24} undefined (a side's values are all equal)")
         else:
-            lines.append(f"  {_NAMES[name]:<24} {s['value']:+.3f}  [{s['low']:+.3f}, {s['high']:+.3f}]")
+            lines.append(f"  {_NAMES[name]:<24} {s['value']:+.3f}  [{s['low']:+.3f}, {s['high']:+.3f}]"
+                         f"{measured_coverage_note(s)}")
     lines.append("")
     lines.append(f"{'checkpoint':<24} {'task':<32} {'imagined':>9} {'real':>9}  rollouts")
     for p in result["points"]:

@@ -27,10 +27,15 @@ from ..jobs.pool import default_jobs, worker_count
 from ..jobs.ray import ray_workers
 from ..units import DEFAULT_LIMIT_MARGIN_DEG, JOINT_NAMES
 from .outcomes import attach_outcomes, outcome_lines, success_lines
+from .repository_figures import attach_source_facts, repository_lines
 from .rows import aggregate, limit_margin, limit_steps, prompt_divergence_record, prompt_pairs
 from .sanity_text import sanity_lines
 from .tasks import EpisodeTask, Task, plan_episode_tasks, plan_tasks, run_tasks, run_tasks_on_ray
 from .trajectories import TRAJECTORY_LAYOUT, trajectory_table
+
+# Row fields a report sets on each row after the metrics cache (a cached row lacks them): outcomes
+# (a label changes without the rollout changing) and what the rollout's source says of it.
+FIELDS_SET_AFTER_CACHE = ("outcome_sources", "task_outcome", "distribution_source", "dataset", "repository_figures")
 
 CHAINED_TITLES = {
     "autoregressive": "Autoregressive rollouts (drift in data units; post-episode samples excluded)",
@@ -121,7 +126,9 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
                 raise InspectorError(where, "no rollouts to report")
             more = f" ({len(failed) - 1} more broken rollout(s))" if len(failed) > 1 else ""
             raise InspectorError(failed[0].file, failed[0].what + more)
+        # FIELDS_SET_AFTER_CACHE, on every row, cached or not
         outcome_warnings = attach_outcomes(sources, rows, outcome_source)  # after the cache: labels change
+        source_notes = attach_source_facts(sources, rows)  # after the cache too: the source's files change
         keys = sorted(rows, key=order.__getitem__)
         dataset_roots = {str(d.root) for d in sources.datasets}
         session_keys = [k for k in keys if k[0] not in dataset_roots]
@@ -138,7 +145,8 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
             episodes = [e for e in episodes if e.get("layout") != TRAJECTORY_LAYOUT]
         if episodes:
             report["episodes"] = episodes
-        warnings = [f"{r['tag']}: {r['gt_warning']}" for r in ordered if r.get("gt_warning")] + outcome_warnings
+        warnings = ([f"{r['tag']}: {r['gt_warning']}" for r in ordered if r.get("gt_warning")] + outcome_warnings
+                    + source_notes)
         if warnings:
             report["warnings"] = warnings
         if errors:
@@ -248,6 +256,7 @@ def format_report(report: dict[str, Any]) -> str:
         if any(r["time_aligned_drift"] is None for r in auto):
             lines.append("  ('-': no GT joints; import with --dataset ROOT to measure drift)")
         lines.append("")
+    lines += repository_lines(rows)
     for warning in report.get("warnings", []):
         lines.append(f"warning: {warning}")
     for err in report.get("errors", {}).values():

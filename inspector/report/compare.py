@@ -5,10 +5,11 @@ Rows come from :func:`inspector.report.build.build_report` (its workers and metr
 pair by tag; those left pair by (episode, start frame, prompt, kind), tags sharing the longest
 prefix first. Per pair:
 both rows and the differences ``b - a`` (positive: B is worse). Over the pairs: how often each
-side is better (lower wins), the mean difference, the rank agreement (Spearman) and a Wilcoxon
-signed-rank test, for the chunk RMSE and, where GT joints exist, the time-aligned drift; per view,
-the same for the mean PSNR (higher is better), and the pairs' success on each side: how rollouts
-without joints (video only) compare.
+side is better (lower wins), the mean difference and the rank agreement (Spearman), for the chunk
+RMSE and, where GT joints exist, the time-aligned drift; per view, the same for the mean PSNR
+(higher is better): how rollouts without joints (video only) compare. Whether a difference is
+real, success included, is decided once per metric by its test (:mod:`.significance`). Each side
+is named by the model and checkpoint its ``session.json`` states, else by its folder.
 """
 
 from __future__ import annotations
@@ -18,19 +19,19 @@ import os
 import warnings
 from collections import defaultdict
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..data.session import SESSION_FILE, is_rollout, is_session, read_json
 from ..errors import InspectorError
+from ..stats import TIE_TOLERANCE, signed_rank_test
 from .build import build_report
 from .rows import nearest_tag as _nearest_tag
 from .significance import metric_tests, verdict_lines
 
 Row = dict[str, Any]
-# |b - a| at most this is a tie: identical inputs give identical numbers, but not bit for bit
-# across a cache round trip [data units].
-TIE_TOLERANCE = 1e-9
 # Text output lists at most this many pairs (the largest differences).
 MAX_TEXT_PAIRS = 30
 
@@ -115,7 +116,8 @@ def paired_summary(a: Sequence[float], b: Sequence[float]) -> dict[str, Any]:
     Returns:
         ``n_pairs``, ``a_better``, ``b_better``, ``ties``, ``mean_delta`` (b - a), ``spearman``
         (rank correlation of a and b; None with fewer than 2 pairs or a constant side),
-        ``wilcoxon_p`` (two-sided signed-rank test of b - a; None when every pair ties).
+        ``wilcoxon_p`` (the two-sided signed-rank test of b - a that ``tests`` also reports, from
+        :func:`inspector.stats.signed_rank_test`; None when every pair ties).
     """
     from scipy import stats
 
@@ -130,9 +132,9 @@ def paired_summary(a: Sequence[float], b: Sequence[float]) -> dict[str, Any]:
         warnings.simplefilter("ignore")  # constant input, small samples: reported as None
         if d.size >= 2 and np.ptp(a_arr) > 0 and np.ptp(b_arr) > 0:
             out["spearman"] = _finite_or_none(stats.spearmanr(a_arr, b_arr).statistic)
-        nonzero = d[np.abs(d) > TIE_TOLERANCE]
-        if nonzero.size:
-            out["wilcoxon_p"] = _finite_or_none(stats.wilcoxon(nonzero).pvalue)
+    if np.isfinite(d).any():
+        p = signed_rank_test(d[np.isfinite(d)]).pvalue
+        out["wilcoxon_p"] = None if p is None else _finite_or_none(p)
     return out
 
 
@@ -146,7 +148,7 @@ def compare_reports(report_a: dict[str, Any], report_b: dict[str, Any]) -> dict[
         ``b_better``, ``ties``, ``mean_delta_rmse_deg``, ``spearman_rmse``, ``wilcoxon_p``) and
         ``time_aligned_drift`` (the same for the mean time-aligned drift, compared over pairs
         with GT joints on both sides), ``tests`` (per metric: ``metric``, ``n_pairs``,
-        ``mean_diff``, ``ci95``, ``p``, ``test``, ``verdict``; see
+        ``estimate``, ``ci95``, ``p``, ``test``, ``verdict``, success among them; see
         :mod:`inspector.report.significance`). Differences are b - a, in data units.
     """
     matched, unmatched_a, unmatched_b = pair_rows(report_a["rollouts"], report_b["rollouts"])
@@ -175,8 +177,7 @@ def compare_reports(report_a: dict[str, Any], report_b: dict[str, Any]) -> dict[
                                "wilcoxon_p": drift["wilcoxon_p"]},
     }
     out["video_psnr_db"] = _psnr_summary(pairs)
-    out["success"] = _success_summary(pairs)
-    # is each difference real: interval, test and verdict per metric (inspector.report.significance)
+    # is each difference real, success included: one test per metric (inspector.report.significance)
     out["tests"] = metric_tests([(a, b) for a, b, _ in matched], report_a["rollouts"], report_b["rollouts"])
     errors = {side: rep["errors"] for side, rep in (("a", report_a), ("b", report_b)) if rep.get("errors")}
     if errors:
@@ -207,23 +208,31 @@ def _psnr_summary(pairs: Sequence[Row]) -> dict[str, dict[str, Any]]:
     return out
 
 
-def _success_summary(pairs: Sequence[Row]) -> dict[str, int]:
-    """Pairs whose rows both carry a simulated evaluation's success: how many succeeded on both
-    sides, only on A's, only on B's, on neither."""
-    def success(r: Row) -> bool | None:
-        o = r.get("outcome")
-        return o.get("success") if isinstance(o, dict) else None
-
-    both = [(bool(x), bool(y)) for x, y in ((success(p["a"]), success(p["b"])) for p in pairs)
-            if x is not None and y is not None]
-    return {"n_compared": len(both), "both": sum(x and y for x, y in both),
-            "only_a": sum(x and not y for x, y in both), "only_b": sum(y and not x for x, y in both),
-            "neither": sum(not x and not y for x, y in both)}
+def side_name(path: str | Path) -> str:
+    """What a side of the comparison evaluated: ``model.name@model.checkpoint`` from the
+    ``session.json`` of the session (or of the rollout's session) at ``path``, else the folder's name."""
+    root = Path(path)
+    if is_rollout(root) and not is_session(root) and is_session(root.parent.parent):
+        root = root.parent.parent
+    if is_session(root):
+        try:
+            meta = read_json(root / SESSION_FILE)
+        except InspectorError:
+            meta = None  # build_report says what is wrong with it
+        model = meta.get("model") if isinstance(meta, dict) else None
+        if isinstance(model, dict):
+            name, checkpoint = model.get("name"), model.get("checkpoint")
+            if name and checkpoint:
+                return f"{name}@{checkpoint}"
+            if name or checkpoint:
+                return str(name or checkpoint)
+    return root.resolve().name or str(path)
 
 
 def build_comparison(path_a: str, path_b: str, **report_args: Any) -> dict[str, Any]:
     """Report both paths (``report_args`` as :func:`inspector.report.build.build_report` takes them)
-    and compare them; ``a`` and ``b`` name the paths.
+    and compare them; ``a`` and ``b`` are the paths, ``names`` what each evaluated
+    (:func:`side_name`).
 
     Raises:
         InspectorError: a path cannot be reported, or no rollout of A pairs with one of B.
@@ -232,7 +241,8 @@ def build_comparison(path_a: str, path_b: str, **report_args: Any) -> dict[str, 
     if not comparison["pairs"]:
         raise InspectorError(path_b, f"no rollout pairs with one of {path_a} (pairing by tag, else by "
                                      "episode, start frame, prompt and kind)")
-    return {"a": str(path_a), "b": str(path_b), **comparison}
+    return {"a": str(path_a), "b": str(path_b), "names": {"a": side_name(path_a), "b": side_name(path_b)},
+            **comparison}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -253,8 +263,7 @@ def _summary_line(name: str, s: dict[str, Any], mean_key: str, spearman_key: str
     if not s["n_compared"]:
         return f"{name}: no pair with values on both sides"
     return (f"{name} over {s['n_compared']} pair(s): A better {s['a_better']}, B better {s['b_better']}, "
-            f"ties {s['ties']}; mean delta (B - A) {s[mean_key]:+.3f}; Spearman {_f(s[spearman_key], '.3f')}; "
-            f"Wilcoxon p {_f(s['wilcoxon_p'], '.3g')}")
+            f"ties {s['ties']}; mean delta (B - A) {s[mean_key]:+.3f}; Spearman {_f(s[spearman_key], '.3f')}")
 
 
 def format_comparison(c: dict[str, Any]) -> str:
@@ -264,7 +273,9 @@ def format_comparison(c: dict[str, Any]) -> str:
     if len(pairs) > MAX_TEXT_PAIRS:
         shown = sorted(pairs, key=lambda p: -abs(p["delta_rmse_deg"] or 0.0))[:MAX_TEXT_PAIRS]
     width = max([8] + [len(_pair_name(p)) for p in shown])
-    lines = [f"A: {c['a']}", f"B: {c['b']}", "",
+    names = c.get("names") or {}
+    lines = [*(f"{side.upper()}: {names[side]} ({c[side]})" if side in names else f"{side.upper()}: {c[side]}"
+               for side in ("a", "b")), "",
              f"{'rollout':<{width}} {'RMSE A':>8} {'RMSE B':>8} {'delta':>8} {'drift A':>8} {'drift B':>8} "
              f"{'delta':>8}  better"]
     for p in shown:
@@ -281,12 +292,7 @@ def format_comparison(c: dict[str, Any]) -> str:
               _summary_line("Time-aligned drift", c["time_aligned_drift"], "mean_delta_deg", "spearman")]
     for view, v in c.get("video_psnr_db", {}).items():
         lines.append(f"PSNR {view} over {v['n_compared']} pair(s) (higher is better): A better {v['a_better']}, "
-                     f"B better {v['b_better']}, ties {v['ties']}; mean delta (B - A) {v['mean_delta_db'] + 0.0:+.2f} dB; "
-                     f"Wilcoxon p {_f(v['wilcoxon_p'], '.3g')}")
-    succ = c.get("success") or {}
-    if succ.get("n_compared"):
-        lines.append(f"Success over {succ['n_compared']} pair(s): both {succ['both']}, only A {succ['only_a']}, "
-                     f"only B {succ['only_b']}, neither {succ['neither']}")
+                     f"B better {v['b_better']}, ties {v['ties']}; mean delta (B - A) {v['mean_delta_db'] + 0.0:+.2f} dB")
     for side in ("a", "b"):
         tags = c[f"unmatched_{side}"]
         if tags:

@@ -11,6 +11,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, TypedDict, cast
 
+from ..analysis.video_break import QUALITY_MEASURES
 from ..analysis.video_metrics import VideoMetrics, VideoMetricsRecord
 from ..cache import MetricsCache
 from ..units import JOINT_NAMES
@@ -66,7 +67,7 @@ def is_consistent(entry: MetricsEntry) -> bool:
         ssim, match, quality = record["ssim"], record["match"], record["quality"]
         if record["view"] != view or (ssim is not None and len(ssim) != len(record["psnr_db"])):
             return False
-        if quality is not None and (len(quality) != len(record["psnr_db"]) or any(len(q) != 3 for q in quality)):
+        if quality is not None and (len(quality) != len(record["psnr_db"]) or any(len(q) != len(QUALITY_MEASURES) for q in quality)):
             return False
         if match is not None and not (len(match["gt_index"]) == len(match["confidence"]) == len(match["ties"])
                                       and all(len(runs) % 2 == 0 for runs in match["ties"])):

@@ -212,7 +212,7 @@ def _draw_rmse_by_position(fig: Figure, rows: Sequence[Row], data: dict[str, Any
             where = f"frame {r['start_frame']}" + (f" of {r['episode_length']}" if r.get("episode_length") else "")
             titles.append(f"{_label(r, len(sessions))}: RMSE {r['rmse_deg']:.3f} at {where}")
         ax.points(data["x"][idx], data["rmse"][idx], colour_class(s_i), titles=titles,
-                  keys=[str(data["keys"][j]) for j in idx], label=session if len(sessions) > 1 else None)
+                  keys=[str(data["keys"][j]) for j in idx], label=f"{session} (a dot per sample)")
     fig.panels.append(Panel(ax.svg()))
     fig.legend = ax.legend
     if not rel:

@@ -38,8 +38,15 @@ def build_ranking(paths: Sequence[str | Path], *, n_bootstrap: int = DEFAULT_BOO
     votes = merged_votes([s.root for s in sessions])
     used: list[tuple[int, int, float]] = []
     progress: dict[int, list[float]] = {i: [] for i in range(len(sessions))}  # scores given in votes [%]
+    resolved: dict[str, int | None] = {}  # votes name a few sessions many times: resolve each once
+
+    def session_index(path: str) -> int | None:
+        if path not in resolved:
+            resolved[path] = index.get(Path(path).resolve())
+        return resolved[path]
+
     for vote in votes:
-        ia, ib = index.get(Path(vote.a.session).resolve()), index.get(Path(vote.b.session).resolve())
+        ia, ib = session_index(vote.a.session), session_index(vote.b.session)
         if ia is None or ib is None or ia == ib:
             continue  # a comparison with a session not ranked here
         _check_rollouts(vote, sessions[ia], sessions[ib])
@@ -56,9 +63,13 @@ def build_ranking(paths: Sequence[str | Path], *, n_bootstrap: int = DEFAULT_BOO
     fit = rank_sessions(len(sessions), first, second, score, n_bootstrap=n_bootstrap, confidence=CONFIDENCE,
                         seed=seed)
     wins = fit.wins
+    tied = np.zeros(len(sessions))  # half a tie per session per tie it took part in
+    for a, b, s in used:
+        if s == TIE:
+            tied[[a, b]] += 0.5
     ranking = []
     for i in fit.order():
-        ties = sum(0.5 for a, b, s in used if s == TIE and i in (a, b))
+        ties = float(tied[i])
         ranking.append({"session": labels[i], "model": model_label(sessions[i]), "strength": float(fit.strength[i]),
                         "low": float(fit.low[i]), "high": float(fit.high[i]), "votes": int(fit.votes[i].sum()),
                         "wins": float(wins[i].sum() - ties), "losses": float(wins[:, i].sum() - ties),
@@ -67,8 +78,9 @@ def build_ranking(paths: Sequence[str | Path], *, n_bootstrap: int = DEFAULT_BOO
                         "progress_scores": len(progress[i])})
     return {**base, "method": "bradley_terry",
             "note": "Bradley-Terry strengths (log odds, mean 0) from blind pairwise votes; ties count half a "
-                    f"win to each side; {CONFIDENCE:.0%} bootstrap intervals over votes ({n_bootstrap} replicates)",
-            "bootstrap": n_bootstrap, "ranking": ranking,
+                    f"win to each side; {CONFIDENCE:.0%} bootstrap intervals over votes ({fit.n_bootstrap} replicates"
+                    f"{'' if fit.n_bootstrap == n_bootstrap else f' of the {n_bootstrap} asked: see docs/ranking.md'})",
+            "bootstrap": fit.n_bootstrap, "ranking": ranking,
             "win_matrix": {"sessions": labels, "wins": wins.tolist(), "votes": fit.votes.tolist()}}
 
 

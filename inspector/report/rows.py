@@ -89,7 +89,8 @@ class RolloutRow(TypedDict):
     video_only: bool  # no predicted joints: every joint field is null, never 0
     limit_violations: LimitRecord | None
     worst_chunk: WorstChunk | None
-    video_psnr_db: dict[str, float]
+    video_psnr_db: dict[str, float]  # per view compared; a view not compared is absent ...
+    video_psnr_note: dict[str, str]  # ... and here, saying why (frames of another geometry)
     video_per_chunk: dict[str, VideoPerChunk]  # per view; imagined frame f in chunk f // frames_per_chunk
     video_action: dict[str, ViewAgreementJson] | None  # per view; null with video_action_note saying why
     video_action_note: str | None
@@ -98,6 +99,7 @@ class RolloutRow(TypedDict):
     gt_warning: str | None
     chunk_joints: ChunkJoints | None
     outcome: dict[str, Any] | None  # a simulated evaluation's verdict (lerobot-eval): success, rewards, task
+    distribution: str | None  # "training" or "zero-shot" as the rollout states it (extra.distribution); null: not stated
     # the sanity measures (analysis/sanity.py)
     seams: SeamsJson | None
     completion: CompletionJson | None
@@ -213,6 +215,7 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics],
         "limit_violations": limit_record(tl.limit_summary(), tl.limit_margin_deg) if joints else None,
         "worst_chunk": {"chunk": worst, "by": worst_by} if joints else None,
         "video_psnr_db": psnr,
+        "video_psnr_note": {view: vm.note for view, vm in sorted(video.items()) if vm.note is not None},
         "video_per_chunk": {view: video_per_chunk(tl, vm) for view, vm in sorted(video.items())
                             if vm.mean_psnr_db is not None},
         "video_action": agreement,
@@ -223,6 +226,8 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics],
         "chunk_joints": _chunk_joints(tl) if joints else None,
         # a simulated evaluation's verdict (success, rewards, task), as its importer kept it
         "outcome": r.extra.get("outcome"),
+        # which data the sample comes from, as its importer states it (sanity test 1 judges the training one)
+        "distribution": d if isinstance(d := r.extra.get("distribution"), str) else None,
         "seams": sanity["seams"],
         "completion": sanity["completion"],
         "joint_coherence": sanity["joint_coherence"],

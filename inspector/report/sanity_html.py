@@ -1,5 +1,9 @@
 """The sanity section of the HTML page: the verdict table, the sanity measures per rollout, the
-imagined videos' degradation curves and the latents' PCA coloured by episode."""
+imagined videos' degradation curves and the latents' PCA coloured by episode.
+
+Both tables fit the page's width: their long text (a verdict's figure and threshold, the joints out
+of phase, the views' breaks) wraps in its cell instead of widening the page.
+"""
 
 from __future__ import annotations
 
@@ -7,9 +11,11 @@ from html import escape
 from typing import Any
 
 from .figures import Figure, Panel
-from .svg import Axes, colour_class
+from .svg import N_COLOURS, Axes, colour_class, series_style
 
 Row = dict[str, Any]
+# Rollouts whose degradation curves each get a colour and dash of their own, and a legend entry.
+MAX_NAMED_LINES = 2 * N_COLOURS
 
 
 def _f(value: Any, fmt: str) -> str:
@@ -21,15 +27,15 @@ def verdict_table(tests: list[dict[str, Any]], headline: str) -> str:
                    f'<td class=t><b>{escape(t["verdict"])}</b></td><td class=t>{escape(t["figure"])}</td>'
                    f'<td class=t>{escape(t["threshold"])}</td></tr>' for t in tests)
     return (f'<p class="sanity-headline"><b>{escape(headline)}</b></p>'
-            f'<table id="sanity"><thead><tr><th>test</th><th>verdict</th><th>figure</th><th>threshold</th></tr>'
-            f"</thead><tbody>{rows}</tbody></table>")
+            f'<div class="table-wrap"><table id="sanity" class="wrap"><thead><tr><th>test</th><th>verdict</th>'
+            f'<th class="long">figure</th><th class="long">threshold</th></tr></thead><tbody>{rows}</tbody></table></div>')
 
 
 def measures_table(rows: list[Row]) -> str:
     """One row per rollout with any sanity measure."""
     head = ["rollout", "seams flagged", "worst seam deg", "jerk p95", "GT jerk p95", "done s", "GT done s",
             "drift before", "drift after", "coupling deg", "out of phase", "video break"]
-    out = [f'<table id="sanity-measures"><thead><tr>{"".join(f"<th>{escape(h)}</th>" for h in head)}</tr></thead><tbody>']
+    out = [f'<table id="sanity-measures" class="wrap"><thead><tr>{"".join(f"<th>{escape(h)}</th>" for h in head)}</tr></thead><tbody>']
     for r in rows:
         s, c, j = r.get("seams"), r.get("completion"), r.get("joint_coherence")
         if s is None and j is None:
@@ -50,11 +56,15 @@ def measures_table(rows: list[Row]) -> str:
     return "".join(out)
 
 
-def degradation_figure(rows: list[Row]) -> Figure | None:
-    """Per-chunk degradation of every chained rollout's imagined video, one panel per view."""
+def degradation_figure(rows: list[Row], keys: list[str] | None = None) -> Figure | None:
+    """Per-chunk degradation of every chained rollout's imagined video, one panel per view, each
+    rollout named in the legend (``keys``: each row's ``data-key``, linking its curves, its legend
+    entry and its table row)."""
     views = sorted({v for r in rows for v in (r.get("video_degradation") or {})})
     if not views:
         return None
+    keys = keys or [str(i) for i in range(len(rows))]
+    named = len(rows) <= MAX_NAMED_LINES  # beyond, alike (each named by its tooltip and table row)
     fig = Figure("video-break", "Where the dream breaks",
                  "Degradation of the imagined video per chunk, no reference needed: the larger of the first "
                  "chunk's sharpness over this chunk's and this chunk's noise energy over the first's (1 = as "
@@ -68,9 +78,14 @@ def degradation_figure(rows: list[Row]) -> Figure | None:
             if d is None:
                 continue
             curve = d["degradation"]
-            ax.line(list(range(len(curve))), curve, colour_class(i), key=None,
+            ax.line(list(range(len(curve))), curve, series_style(i)[0] if named else "many", key=keys[i],
                     title=f"{r['tag']} {view}: break " + ("none" if d["break_chunk"] is None else f"chunk {d['break_chunk']}"))
         fig.panels.append(Panel(ax.svg(), view))
+    fig.legend = [("end", "break threshold (2x the first chunk)", "dash", None)]
+    if named:
+        fig.legend += [(series_style(i)[0], r["tag"], series_style(i)[1], keys[i]) for i, r in enumerate(rows)]
+    else:
+        fig.legend.append(("many", "each rollout", "line", None))
     return fig
 
 
@@ -101,8 +116,9 @@ def sanity_section(report: dict[str, Any], figure_html) -> str:
     if report.get("sanity"):
         parts.append(verdict_table(report["sanity"], report.get("sanity_headline", "")))
     if any(r.get("seams") is not None or r.get("joint_coherence") is not None for r in rows):
-        parts.append(f'<div class="table-wrap">{measures_table(rows)}</div>')
-    figures = [f for f in (degradation_figure([r for r in rows if r.get("video_degradation")]),
+        parts.append(f'<h3 class="sub">Measures per rollout</h3><div class="table-wrap">{measures_table(rows)}</div>')
+    degrading = [i for i, r in enumerate(rows) if r.get("video_degradation")]
+    figures = [f for f in (degradation_figure([rows[i] for i in degrading], [str(i) for i in degrading]),
                            latents_figure(report.get("latents"))) if f is not None]
     if figures:
         parts.append(f'<div class="figures">{"".join(figure_html(f) for f in figures)}</div>')

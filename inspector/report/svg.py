@@ -25,12 +25,23 @@ from html import escape
 import numpy as np
 
 N_COLOURS = 10  # CSS classes c0 .. c9
+# Point markers, told apart by shape where colour already names something else.
+MARKERS = ("circle", "square", "triangle", "diamond")
+CHAR_PX = 6.6  # the width of a tick label's character at the charts' 11 px font (DejaVu Sans, at most about)
 _clip_ids = itertools.count()  # clip paths need ids unique in their page
 
 
 def colour_class(i: int) -> str:
     """The categorical colour class of the i-th series."""
     return f"c{i % N_COLOURS}"
+
+
+def series_style(i: int) -> tuple[str, str]:
+    """(colour class, legend style) of the i-th of many lines: the colours again, dashed, after the
+    first :data:`N_COLOURS` (the dash comes from the ``alt`` class), so twenty lines stay apart."""
+    if (i // N_COLOURS) % 2:
+        return f"{colour_class(i)} alt", "dash"
+    return colour_class(i), "line"
 
 
 def nice_ticks(lo: float, hi: float, n: int = 5) -> list[float]:
@@ -74,6 +85,7 @@ class _Series:
     hi: np.ndarray | None = None
     label: str | None = None
     decimals: int = 1
+    marker: str = "circle"
 
 
 @dataclass
@@ -84,6 +96,8 @@ class Axes:
         x_label, y_label: axis titles (units in brackets).
         width, height: the SVG's size in its own pixels (it scales with the page).
         x_min, x_max, y_min, y_max: fixed range ends (None: from the data).
+        x_ticks: (x, name) of each tick of a categorical axis (a session at each rank), in place of
+            numbered ticks; names too long to sit side by side are drawn slanted.
     """
 
     x_label: str = ""
@@ -94,6 +108,7 @@ class Axes:
     x_max: float | None = None
     y_min: float | None = None
     y_max: float | None = None
+    x_ticks: list[tuple[float, str]] | None = None
     # (cls, label, style, key) of the series given a label: drawn by :func:`legend_html`
     legend: list[tuple[str, str, str, str | None]] = field(default_factory=list)
     _series: list[_Series] = field(default_factory=list)
@@ -121,15 +136,16 @@ class Axes:
             self.legend.append((cls, label, "band", None))
 
     def points(self, xs: Sequence[float], ys: Sequence[float], cls: str, titles: Sequence[str] | None = None,
-               keys: Sequence[str] | None = None, label: str | None = None) -> None:
-        """Dots, each with an optional hover title and ``data-key``."""
+               keys: Sequence[str] | None = None, label: str | None = None, marker: str = "circle") -> None:
+        """Dots, each with an optional hover title and ``data-key``; ``marker`` is one of
+        :data:`MARKERS` (its legend swatch too)."""
         xs_a, ys_a = _arr(xs), _arr(ys)
         for i in range(len(xs_a)):
             self._series.append(_Series("points", xs_a[i:i + 1], ys_a[i:i + 1], cls,
                                         None if keys is None else keys[i],
-                                        None if titles is None else titles[i]))
+                                        None if titles is None else titles[i], marker=marker))
         if label:
-            self.legend.append((cls, label, "dot", None))
+            self.legend.append((cls, label, "dot" if marker == "circle" else marker, None))
 
     def vline(self, x: float, cls: str = "end", label: str | None = None) -> None:
         """A vertical marker across the plot, with a label at its top."""
@@ -151,8 +167,10 @@ class Axes:
     def svg(self) -> str:
         """The chart as one ``<svg>`` element."""
         (x0, x1), (y0, y1) = self._ranges()
-        px0, px1 = self.margin_left, self.width - self.margin_right
-        py0, py1 = self.height - self.margin_bottom, self.margin_top  # y grows downwards
+        slant = self._tick_slant(x1 - x0)
+        bottom = self.margin_bottom + (_slanted_height(self.x_ticks or []) if slant else 0)
+        px0, px1 = self._slanted_left(x0, x1) if slant else self.margin_left, self.width - self.margin_right
+        py0, py1 = self.height - bottom, self.margin_top  # y grows downwards
 
         def X(v: np.ndarray) -> np.ndarray:
             return px0 + (v - x0) / (x1 - x0) * (px1 - px0)
@@ -162,7 +180,7 @@ class Axes:
 
         out = [f'<svg class="chart" viewBox="0 0 {self.width} {self.height}" role="img" '
                f'data-x="{x0:.9g} {x1:.9g} {px0} {px1}" data-y="{y0:.9g} {y1:.9g} {py0} {py1}">']
-        out.append(self._axes_svg(X, Y, (x0, x1), (y0, y1), (px0, px1), (py0, py1)))
+        out.append(self._axes_svg(X, Y, (x0, x1), (y0, y1), (px0, px1), (py0, py1), slant))
         clip = f"clip{next(_clip_ids)}"
         pad = 6  # dots and thick lines at the range's ends stay whole
         out.append(f'<clipPath id="{clip}"><rect x="{px0 - pad}" y="{py1 - pad}" width="{px1 - px0 + 2 * pad}" '
@@ -174,7 +192,38 @@ class Axes:
         out.append("</g></svg>")
         return "".join(out)
 
-    def _axes_svg(self, X, Y, xr: tuple[float, float], yr: tuple[float, float], pxr, pyr) -> str:
+    def _tick_slant(self, x_span: float) -> bool:
+        """Whether the named ticks are too long to sit side by side (then they are drawn slanted)."""
+        if not self.x_ticks or len(self.x_ticks) < 2:
+            return False
+        xs = sorted(x for x, _ in self.x_ticks)
+        gap_px = min(b - a for a, b in zip(xs, xs[1:])) / x_span * (self.width - self.margin_left - self.margin_right)
+        return max(len(name) for _, name in self.x_ticks) * CHAR_PX > gap_px - 8
+
+    def _slanted_left(self, x0: float, x1: float) -> float:
+        """The plot's left edge [px] that leaves the first slanted name room to the left of its tick."""
+        assert self.x_ticks
+        first = min(self.x_ticks)
+        need = len(first[1]) * CHAR_PX * math.cos(math.radians(35)) + 4
+        f = (first[0] - x0) / (x1 - x0)  # where the first tick sits along the plot
+        right = self.width - self.margin_right
+        return max(self.margin_left, math.ceil((need - f * right) / (1 - f)))
+
+    def _x_ticks_svg(self, X, xr: tuple[float, float], py0: float, slant: bool) -> list[str]:
+        parts = []
+        if self.x_ticks is None:
+            ticks = [(t, _fmt(t)) for t in nice_ticks(*xr, n=6) if xr[0] - 1e-9 <= t <= xr[1] + 1e-9]
+        else:
+            ticks = [(t, name) for t, name in self.x_ticks]
+        for t, name in ticks:
+            x = _num(float(X(np.float64(t))))
+            text = (f'<text x="{x}" y="{py0 + 15}" text-anchor="middle">{escape(name)}</text>' if not slant else
+                    f'<text x="{x}" y="{py0 + 12}" text-anchor="end" transform="rotate(-35 {x} {py0 + 12})">'
+                    f"{escape(name)}</text>")
+            parts.append(f'<line class="tick" x1="{x}" x2="{x}" y1="{py0}" y2="{py0 + 4}"/>{text}')
+        return parts
+
+    def _axes_svg(self, X, Y, xr: tuple[float, float], yr: tuple[float, float], pxr, pyr, slant: bool = False) -> str:
         (px0, px1), (py0, py1) = pxr, pyr
         parts = ['<g class="axes">']
         for t in nice_ticks(*yr):
@@ -182,11 +231,7 @@ class Axes:
                 y = _num(float(Y(np.float64(t))))
                 parts.append(f'<line class="grid" x1="{px0}" x2="{px1}" y1="{y}" y2="{y}"/>'
                              f'<text x="{px0 - 5}" y="{y}" dy="0.32em" text-anchor="end">{_fmt(t)}</text>')
-        for t in nice_ticks(*xr, n=6):
-            if xr[0] - 1e-9 <= t <= xr[1] + 1e-9:
-                x = _num(float(X(np.float64(t))))
-                parts.append(f'<line class="tick" x1="{x}" x2="{x}" y1="{py0}" y2="{py0 + 4}"/>'
-                             f'<text x="{x}" y="{py0 + 15}" text-anchor="middle">{_fmt(t)}</text>')
+        parts += self._x_ticks_svg(X, xr, py0, slant)
         parts.append(f'<path class="frame" d="M{px0},{py1}V{py0}H{px1}"/>')
         parts.append(f'<text class="label" x="{(px0 + px1) / 2:g}" y="{self.height - 6}" '
                      f'text-anchor="middle">{escape(self.x_label)}</text>')
@@ -207,6 +252,8 @@ def legend_html(entries: Sequence[tuple[str, str, str, str | None]]) -> str:
             swatch = f'<rect class="{cls}" x="1" y="1" width="20" height="10"/>'
         elif style == "dot":
             swatch = f'<circle class="pt {cls}" cx="11" cy="6" r="4"/>'
+        elif style in MARKERS:
+            swatch = _marker(style, 11, 6, cls, "", "")
         else:
             dash = ' stroke-dasharray="4 3"' if style == "dash" else ""
             swatch = f'<path class="ln {cls}" d="M1,6h20"{dash}/>'
@@ -214,6 +261,26 @@ def legend_html(entries: Sequence[tuple[str, str, str, str | None]]) -> str:
         parts.append(f'<span class="entry"{data_key}><svg width="22" height="12">{swatch}</svg>{escape(label)}</span>')
     parts.append("</div>")
     return "".join(parts)
+
+
+def _slanted_height(ticks: Sequence[tuple[float, str]]) -> float:
+    """The height [px] that tick names slanted at 35 degrees take below the axis, beyond a straight one's."""
+    return max(len(name) for _, name in ticks) * CHAR_PX * math.sin(math.radians(35)) - 6
+
+
+def _marker(shape: str, cx: float, cy: float, cls: str, key: str, title: str, r: float = 4) -> str:
+    """A point's marker: a circle, square, triangle or diamond of about the same area, centred on (cx, cy)."""
+    attrs = f'class="pt {cls}"{key}'
+    if shape == "square":
+        s = r * 0.89
+        return f'<rect {attrs} x="{_num(cx - s)}" y="{_num(cy - s)}" width="{_num(2 * s)}" height="{_num(2 * s)}">{title}</rect>'
+    if shape in ("triangle", "diamond"):
+        s = r * 1.25
+        corners = ([(cx, cy - s), (cx + s, cy + s * 0.8), (cx - s, cy + s * 0.8)] if shape == "triangle" else
+                   [(cx, cy - s), (cx + s, cy), (cx, cy + s), (cx - s, cy)])
+        d = "M" + "L".join(f"{_num(a)},{_num(b)}" for a, b in corners) + "Z"
+        return f'<path {attrs} d="{d}">{title}</path>'
+    return f'<circle {attrs} cx="{_num(cx)}" cy="{_num(cy)}" r="{_num(r)}">{title}</circle>'
 
 
 def _label_rows(xs_px: list[float], min_gap_px: float = 60.0):
@@ -282,8 +349,7 @@ def _draw(s: _Series, X, Y, pyr, label_dy: float = 0) -> str:
     if s.kind == "points":
         if not (np.isfinite(s.xs[0]) and np.isfinite(s.ys[0])):
             return ""
-        return (f'<circle class="pt {s.cls}"{key} cx="{_num(float(X(s.xs)[0]))}" cy="{_num(float(Y(s.ys)[0]))}" '
-                f'r="4">{title}</circle>')
+        return _marker(s.marker, float(X(s.xs)[0]), float(Y(s.ys)[0]), s.cls, key, title)
     x = _num(float(X(s.xs)[0]))
     label = (f'<text class="vlabel" x="{x}" y="{_num(pyr[1] + 2 + label_dy)}" dx="3" dy="0.8em">{escape(s.label)}</text>'
              if s.label else "")

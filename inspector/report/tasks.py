@@ -23,7 +23,7 @@ from ..analysis.measure_settings import DEFAULT_MEASURES, MeasureSettings
 from ..analysis.measures_switch import sanity_measures_on
 from ..analysis.timeline import batch_key, build_timeline, build_timelines
 from ..analysis.video_break import clip_quality
-from ..analysis.video_metrics import VideoMetrics, compare_clips
+from ..analysis.video_metrics import VideoMetrics, compare_clips, resizes_whole_frame
 from ..cache import MetricsCache, rollout_key, take_unsaid
 from ..data.episodes import episode_rollout, episode_tag
 from ..data.ground_truth import resolve_ground_truth
@@ -343,7 +343,8 @@ def _compute_together(batch: list[_Pending], task: Task, cache) -> list[Outcome]
             gt_clip = need[0].gt.clips[view]
             # SSIM (~10x PSNR's cost) where the video is all a rollout has to be judged by
             results = compare_clips(view, [tl.rollout.video(view) for tl in need], gt_clip,
-                                    need[0].gt_index_of_frame(view), with_ssim=not need[0].has_joints)
+                                    need[0].gt_index_of_frame(view), with_ssim=not need[0].has_joints,
+                                    whole_frame=[resizes_whole_frame(tl.rollout.extra) for tl in need])
             for tl, vm in zip(need, results):
                 tl.set_video_metrics(vm)
     outcomes = []

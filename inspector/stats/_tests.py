@@ -9,8 +9,10 @@ from typing import Literal
 
 from ._intervals import normal_quantile, z_quantile
 
-Verdict = Literal["A better", "B better", "no significant difference"]
-NO_DIFFERENCE: Verdict = "no significant difference"
+Verdict = Literal["A better", "B better", "no difference shown"]
+NO_DIFFERENCE: Verdict = "no difference shown"
+ALPHA = 0.05  # every verdict's level: a side is better only where its test gives p < ALPHA
+
 
 @dataclass(frozen=True)
 class TestResult:
@@ -80,18 +82,76 @@ def rollouts_needed(rate_a: float, rate_b: float, *, confidence: float = 0.95,
     return max(1, math.ceil(n - 1e-9))
 
 
-def verdict_from_interval(ci: tuple[float, float], higher_is_better: bool) -> Verdict:
-    """The verdict of an interval of ``b - a``: a side is better only when the whole interval says so."""
-    lo, hi = ci
-    if lo > 0:
-        return "B better" if higher_is_better else "A better"
-    if hi < 0:
-        return "A better" if higher_is_better else "B better"
-    return NO_DIFFERENCE
+def too_few(n: int, need: int, what: str = "pairs") -> str:
+    """The verdict where no outcome of ``n`` could reach significance: says how many it takes."""
+    return f"too few {what} to tell (n = {n}; needs >= {need})"
 
 
-def verdict_from_test(p: float, diff: float, higher_is_better: bool, confidence: float = 0.95) -> Verdict:
-    """The verdict of a test: significant at ``1 - confidence`` and in the direction of ``diff`` (b - a)."""
-    if p >= 1.0 - confidence or diff == 0:
+def verdict_from_test(p: float, diff: float, higher_is_better: bool, alpha: float = ALPHA) -> Verdict:
+    """The verdict of a test: significant (``p < alpha``) and in the direction of ``diff`` (b - a)."""
+    if p >= alpha or diff == 0:
         return NO_DIFFERENCE
     return "B better" if (diff > 0) == higher_is_better else "A better"
+
+
+def mcnemar_interval(a_only: int, b_only: int, n_pairs: int,
+                     confidence: float = 0.95) -> tuple[float, float] | None:
+    """The exact conditional interval of the paired difference of success rates ``B - A``.
+
+    Given the ``m = a_only + b_only`` discordant pairs, ``b_only ~ Binomial(m, pi)``; the
+    Clopper-Pearson interval of ``pi`` (scipy's ``binomtest(b_only, m).proportion_ci("exact")``)
+    maps to the rate difference ``(2 pi - 1) m / n_pairs``. It leaves 0 out exactly when
+    :func:`mcnemar_exact` rejects at ``1 - confidence``: both invert the same binomial tails
+    (Breslow & Day 1980, "Statistical Methods in Cancer Research" I, section 5.2). None without a
+    discordant pair.
+    """
+    m = a_only + b_only
+    if m == 0:
+        return None
+    from scipy import stats
+
+    ci = stats.binomtest(b_only, m).proportion_ci(confidence_level=confidence, method="exact")
+    return (2.0 * ci.low - 1.0) * m / n_pairs, (2.0 * ci.high - 1.0) * m / n_pairs
+
+
+def fisher_central(successes_a: int, n_a: int, successes_b: int, n_b: int) -> TestResult:
+    """Fisher's exact test, two-sided as twice the smaller one-sided p (at most 1): the form whose
+    inversion is the exact conditional interval of the odds ratio (:func:`fisher_odds_ratio`)."""
+    from scipy import stats
+
+    table = [[successes_b, n_b - successes_b], [successes_a, n_a - successes_a]]
+    less = stats.fisher_exact(table, alternative="less").pvalue
+    greater = stats.fisher_exact(table, alternative="greater").pvalue
+    return TestResult(float(min(1.0, 2.0 * min(less, greater))), "fisher_exact_central")
+
+
+def fisher_odds_ratio(successes_a: int, n_a: int, successes_b: int, n_b: int,
+                      confidence: float = 0.95) -> tuple[float | None, float | None, float | None]:
+    """B's odds of success over A's: the conditional maximum-likelihood estimate and its exact
+    conditional interval (scipy's ``contingency.odds_ratio(kind="conditional")``; Cornfield 1956),
+    which leaves 1 out exactly when :func:`fisher_central` rejects at ``1 - confidence``. What is
+    infinite (a side with no failure) is None."""
+    from scipy.stats.contingency import odds_ratio
+
+    result = odds_ratio([[successes_b, n_b - successes_b], [successes_a, n_a - successes_a]], kind="conditional")
+    ci = result.confidence_interval(confidence_level=confidence)
+
+    def finite(v: float) -> float | None:
+        return float(v) if math.isfinite(v) else None
+
+    return finite(result.statistic), finite(ci.low), finite(ci.high)
+
+
+def fisher_min_per_side(alpha: float = ALPHA) -> int:
+    """The fewest rollouts a side at which Fisher's test can reject (all of one side succeeding,
+    none of the other: ``p = 2 / C(2n, n)``): 4 at 0.05."""
+    n = 1
+    while 2.0 / math.comb(2 * n, n) >= alpha:
+        n += 1
+    return n
+
+
+def fisher_can_reject(n_a: int, n_b: int, alpha: float = ALPHA) -> bool:
+    """Whether any outcome of ``n_a`` and ``n_b`` rollouts could reach ``p < alpha`` in
+    :func:`fisher_central` (its most extreme table has ``p = 2 / C(n_a + n_b, n_a)``)."""
+    return 2.0 / math.comb(n_a + n_b, n_a) < alpha

@@ -29,6 +29,7 @@ each imagined frame: the rollout's GT views pair frame by frame with its imagine
 
 from __future__ import annotations
 
+import hashlib
 import re
 import tempfile
 from collections.abc import Callable, Iterator
@@ -44,7 +45,7 @@ from ...units import Units
 from ..lerobot_dataset import LeRobotDataset, find_dataset
 from ..session import SessionWriter, check_apart
 from ..video import VideoClip, encode_h264, probe
-from .dreamzero_so101 import check_episode_flag, tag_from_name
+from .dreamzero_so101 import MAX_TAG_CHARS, check_episode_flag, tag_from_name
 
 FORMAT = "dreamzero-served"
 LAYOUT_NAME = "DreamZero served predictions"
@@ -159,14 +160,17 @@ def default_grid(width: int, height: int) -> Grid:
 
 @dataclass
 class ServedVideo:
+    """One served video; ``tag`` its rollout's tag (unique among the directory's, see
+    :func:`find_served`)."""
+
     path: Path
     number: int
     prompt: str
     stamp: str
+    tag: str = ""
 
-    @property
-    def tag(self) -> str:
-        return tag_from_name(self.path.stem)
+    def __post_init__(self) -> None:
+        self.tag = self.tag or tag_from_name(self.path.stem)
 
 
 def parse_name(path: Path) -> ServedVideo | None:
@@ -178,14 +182,43 @@ def parse_name(path: Path) -> ServedVideo | None:
 
 
 def find_served(src: Path) -> list[ServedVideo]:
-    """The served videos at ``src`` (one file, or a directory's), by their number."""
+    """The served videos at ``src`` (one file, or a directory's), by their number, each with its own
+    tag (:func:`distinct_tags`)."""
     if src.is_file():
         one = parse_name(src)
         return [one] if one is not None else []
     if not src.is_dir():
         return []
     found = [v for v in (parse_name(p) for p in src.iterdir() if p.suffix == ".mp4") if v is not None]
-    return sorted(found, key=lambda v: (v.number, v.path.name))
+    return distinct_tags(sorted(found, key=lambda v: (v.number, v.path.name)))
+
+
+def distinct_tags(videos: list[ServedVideo]) -> list[ServedVideo]:
+    """``videos`` with no two sharing a tag. Names that differ only in characters a tag cannot hold
+    (``000003_a b_...`` and ``000003_a_b_...``), or only in case (one directory on a case-blind
+    disk), make the same tag: each of those gets a suffix from a hash of its file name, so its tag
+    does not depend on the order the directory lists them in."""
+    by_tag: dict[str, list[ServedVideo]] = {}
+    for v in videos:
+        by_tag.setdefault(v.tag.lower(), []).append(v)
+    taken = {v.tag.lower() for v in videos}
+    for group in by_tag.values():
+        for v in group if len(group) > 1 else []:
+            digest = hashlib.sha1(v.path.name.encode("utf-8", "surrogateescape")).hexdigest()
+            width = 8
+            tag = _suffixed(v.tag, digest[:width])
+            while tag.lower() in taken and width < len(digest):  # a hash suffix that another name spells
+                width += 4
+                tag = _suffixed(v.tag, digest[:width])
+            v.tag = tag
+            taken.add(tag.lower())
+    return videos
+
+
+def _suffixed(tag: str, suffix: str) -> str:
+    """``tag_suffix`` within the tag length, cutting ``tag``."""
+    head = tag[: MAX_TAG_CHARS - len(suffix) - 1].rstrip("._-")
+    return f"{head}_{suffix}" if head else suffix
 
 
 def is_served(path: Path) -> bool:
@@ -402,7 +435,8 @@ def import_served(src: str | Path, dest: str | Path, *, views: str | None = None
                     rec = dataset_recording(ds, (episode or 0) + k)
                 elif recording is not None:
                     rec = client_recording(_client_video(Path(recording), (episode or 0) + k))
-                args = rollout_args(video, grid, timing, rec, Path(scratch) / video.tag)
+                # numbered, not tagged: a tag is a file name's, and two names may only differ in case
+                args = rollout_args(video, grid, timing, rec, Path(scratch) / f"{k:06}")
                 writer.add_rollout(video.tag, **args)
             except InspectorError as exc:
                 if not keep_going:

@@ -20,6 +20,13 @@ kept as the source's figures (``extra.reference_metrics``), with a note where on
 name suggests (``extra.reference_notes``): a mosaic sample's ``video_psnr_db`` compared the whole
 mosaic with the single front view.
 
+A sample listed in ``aggregate.json`` / ``all_metas.json`` without a folder is a single-chunk
+rollout without video (said in ``extra.source_notes``); where a folder and its entry disagree,
+the folder's meta.json is used and the note says so. Each rollout's distribution (``extra.distribution``:
+``zero-shot`` / ``training``) and dataset (``extra.dataset``) are set where the checkout says them;
+the ``train_rollout/`` summary files' figures join ``extra.reference_metrics`` as ``<file>:<field>``
+(see :mod:`.dreamzero_so101_summaries`).
+
 A rollout's tag is its directory name made into a valid tag (ASCII letters, digits, ``_.-``, at
 most 128 characters); the directory's own name is kept in ``extra.source.name``.
 """
@@ -44,6 +51,7 @@ from ...units import JOINT_NAMES, Units
 from ..lerobot_dataset import LeRobotDataset, dataset_name, find_dataset
 from ..session import SessionWriter, check_apart, check_values, json_too_large, load_array, read_json_object
 from ..video import decode
+from .dreamzero_so101_summaries import INDEX_NAMES, SampleIndex, TrainSummaries, claims_index, differences, distribution_of, read_index, training_dataset
 
 MOSAIC_VIEWS = (("front", 0, 0), ("top", 0, 1), ("gripper", 1, 0))  # (view, row, col) of the 2x2
 PRED_MOSAIC = "predicted_video.mp4"
@@ -57,23 +65,59 @@ REFERENCE_FIELDS = ("action_rmse_deg", "action_mse_deg2", "per_joint_rmse", "per
 
 
 @dataclass
+class Listed:
+    """A sample's entry ``i`` in an ``aggregate.json`` / ``all_metas.json``."""
+
+    index: SampleIndex
+    i: int
+
+
+@dataclass
 class SourceDir:
-    path: Path
-    kind: str  # "autoregressive" | "single_chunk"
+    path: Path  # a listed sample without a folder: where its folder would be
+    kind: str  # "autoregressive" | "single_chunk" | "listed" (a sample only an index lists)
+    listed: Listed | None = None  # its entry in an index (a folder's too, compared with its meta.json)
+    error: InspectorError | None = None  # an index that could not be read
 
 
 def find_sources(src: str | Path) -> list[SourceDir]:
-    """Every DreamZero-SO101 rollout directory at or under ``src``, sorted by path."""
+    """Every DreamZero-SO101 rollout directory at or under ``src``, and every sample an
+    ``aggregate.json`` / ``all_metas.json`` there lists without a folder, sorted by path."""
     src = Path(src)
     if not src.exists():
         raise InspectorError(src, "not found")
     candidates = [src] if src.is_dir() else []
     candidates += sorted(p for p in src.rglob("*") if p.is_dir()) if src.is_dir() else []
     found = [s for s in (_classify(p) for p in candidates) if s is not None]
+    found += _listed_sources(candidates, found)
     if not found:
         raise InspectorError(src, "no DreamZero-SO101 rollout found (expected action_trace.npy + "
-                                  "meta.json, or meta.json with actions_pred/actions_gt)")
-    return found
+                                  "meta.json, meta.json with actions_pred/actions_gt, or aggregate.json)")
+    return sorted(found, key=lambda s: s.path)
+
+
+def _listed_sources(candidates: list[Path], found: list[SourceDir]) -> list[SourceDir]:
+    """The entries of every index under the candidates: each joins its folder's source where
+    that folder was found, else is a source of its own (an unreadable index: one with ``error``)."""
+    folders = {s.path: s for s in found if s.kind == "single_chunk"}
+    out = []
+    for directory in candidates:
+        for index_path in (directory / name for name in INDEX_NAMES):
+            if not claims_index(index_path):
+                continue
+            try:
+                index = read_index(index_path)
+            except InspectorError as exc:
+                out.append(SourceDir(index_path, "listed", error=exc))
+                continue
+            for i in range(len(index.entries)):
+                tag = index.tag(i)
+                folder = folders.get(directory / tag) if tag is not None else None
+                if folder is not None and folder.listed is None:
+                    folder.listed = Listed(index, i)
+                else:
+                    out.append(SourceDir(directory / (tag or f"sample{i}"), "listed", Listed(index, i)))
+    return out
 
 
 def _classify(path: Path) -> SourceDir | None:
@@ -115,6 +159,15 @@ def import_dreamzero(
     Returns:
         The session directory.
     """
+    return _import(src, dest, dataset=dataset, episode=episode, overwrite=overwrite, log=log)[0]
+
+
+def _import(src: str | Path, dest: str | Path, *, dataset: str | Path | None = None, episode: int | None = None,
+            overwrite: bool = False, keep_going: bool = False, log: Callable[[str], None] = print,
+            ) -> tuple[Path, dict[str, InspectorError]]:
+    """:func:`import_dreamzero`, and with ``keep_going`` a bad sample of an index (or an index
+    that cannot be read) is returned among the errors while the others are imported; a bad
+    folder always stops the import."""
     sources = find_sources(src)
     src = Path(src)
     check_apart(dest, src)
@@ -124,37 +177,131 @@ def import_dreamzero(
         ds = LeRobotDataset(find_dataset(dataset))
         check_apart(dest, ds.root, "the GT dataset")
         check_episode_flag(ds, episode)
+    checkout = Checkout(src, sources)
     units = ds.units if ds is not None else Units("degrees")
+    errors: dict[str, InspectorError] = {}
     with SessionWriter.create(dest, name=Path(dest).name, units=units,
                               model={"name": "DreamZero-SO101"},
                               dataset=str(Path(ds.root).resolve()) if ds is not None else None,
                               overwrite=overwrite) as writer:
         used: set[str] = set()
         for source in sources:
-            tag = _unique_tag(source.path, src, used)
-            args = _autoregressive(source.path) if source.kind == "autoregressive" else _single_chunk(source.path)
+            tag = unique_tag(source.path, src, used)
+            try:
+                args = checkout.rollout_args(source, tag)
+            except InspectorError as exc:
+                if not (keep_going and source.kind == "listed"):
+                    raise
+                errors[tag] = exc
+                log(f"{tag}: error: {exc}")
+                continue
             warning = _attach_dataset_gt(args, ds, episode, source.path) if ds is not None else None
             if warning is not None:
                 args["extra"].setdefault("warnings", []).append(warning)
             writer.add_rollout(tag, **args)
-            log(_summary(tag, args) + (f"; warning: {warning}" if warning else ""))
-    return Path(dest)
+            notes = [*args["extra"].get("source_notes", []), *([warning] if warning else [])]
+            log(_summary(tag, args) + "".join(f"; warning: {w}" for w in notes))
+    return Path(dest), errors
 
 
-def load_in_memory(src: str | Path, **kwargs: Any) -> tuple[Path, tempfile.TemporaryDirectory]:
-    """Import into a temporary session (for ``report``/``serve``/``export`` on a raw source dir).
+def load_in_memory(src: str | Path, **kwargs: Any
+                   ) -> tuple[Path, tempfile.TemporaryDirectory, dict[str, InspectorError]]:
+    """Import into a temporary session (for ``report``/``serve``/``export`` on a raw source dir);
+    a bad sample of an ``aggregate.json`` / ``all_metas.json`` is left out and returned among the
+    errors, the others are imported.
 
     Returns:
-        (session_path, handle): keep ``handle`` alive as long as the session is used.
+        (session_path, handle, errors): keep ``handle`` alive as long as the session is used.
     """
     handle = tempfile.TemporaryDirectory(prefix="inspector-session-")
     dest = Path(handle.name) / Path(src).resolve().name
     try:
-        import_dreamzero(src, dest, log=lambda _: None, **kwargs)
+        _, errors = _import(src, dest, log=lambda _: None, keep_going=True, **kwargs)
     except BaseException:
         handle.cleanup()  # a failed import leaves no temporary directory behind
         raise
-    return dest, handle
+    return dest, handle, errors
+
+
+class Checkout:
+    """What the whole source tree says about each of its rollouts: the indexes beside the
+    folders, the training dataset a zero-shot disclosure names, the summary files."""
+
+    def __init__(self, root: Path, sources: list[SourceDir]) -> None:
+        self.root = root.resolve()
+        indexes = {id(s.listed.index): s.listed.index for s in sources if s.listed is not None}
+        self.by_dir = {index.path.parent.resolve(): index for index in indexes.values()}
+        self.training = training_dataset(list(indexes.values()))
+        self.summaries = TrainSummaries(self.shown)
+
+    def shown(self, path: Path) -> str:
+        """``path`` as messages name it: from the source directory's own name on."""
+        path = Path(path).resolve()
+        return str(path.relative_to(self.root.parent)) if path.is_relative_to(self.root.parent) else str(path)
+
+    def rollout_args(self, source: SourceDir, tag: str, cut_mosaic: bool = True) -> dict[str, Any]:
+        """The :meth:`SessionWriter.add_rollout` arguments of one source, its notes, distribution
+        and the repository's figures in ``extra`` (``cut_mosaic`` False: a mosaic's views are named,
+        not cut, for ``inspector info``)."""
+        if source.error is not None:
+            raise source.error
+        listed = source.listed
+        # the index that lists the sample, else one beside its folder
+        index = listed.index if listed is not None else self.by_dir.get(source.path.parent.resolve())
+        if source.kind == "autoregressive":
+            args = _autoregressive(source.path)
+            figures, files, notes = self.summaries.figures(source.path, source.path.name)
+            args["extra"]["reference_metrics"].update(figures)
+            args["extra"]["source_notes"] = notes
+            if files:
+                args["extra"]["reference_sources"] = {"meta.json": str(source.path.resolve() / "meta.json"), **files}
+        elif source.kind == "single_chunk":
+            args = _single_chunk(source.path, index.context if index is not None else None, cut_mosaic)
+            if index is not None and index.context:  # its episode, length or prompt may come from there
+                args["extra"]["source"]["also_read"] = [str(index.path.resolve())]
+            args["extra"]["source_notes"] = self._compare(source.path, listed) if listed is not None else []
+        else:
+            assert listed is not None
+            args = self._listed(source, listed)
+        if index is not None and index.figures:
+            args["extra"]["reference_metrics"].update({f"{index.path.name}:{k}": v for k, v in index.figures.items()})
+            args["extra"].setdefault("reference_sources", {})[index.path.name] = str(index.path.resolve())
+        marked = distribution_of(source.path, tag, index, self.training, self.shown)
+        args["extra"].update(marked)
+        if marked:  # the app's card and the .rrd description show it
+            args["extra"].setdefault("facts", []).append(
+                ["distribution", f"{marked['distribution']} ({marked['distribution_source']})"])
+        if not args["extra"]["source_notes"]:
+            del args["extra"]["source_notes"]
+        return args
+
+    def _listed(self, source: SourceDir, listed: Listed) -> dict[str, Any]:
+        """A sample only an index holds: its actions and GT from the entry, no video."""
+        index, where = listed.index, listed.index.where(listed.i)
+        try:
+            meta = index.sample_meta(listed.i)
+            args = _chunk_args(meta, index.path, None)
+        except InspectorError as exc:
+            raise InspectorError(index.path, f"{where}: {exc.what}") from None
+        args["extra"]["source"].update(path=str(index.path.resolve()), name=source.path.name, entry=where)
+        args["extra"]["source_notes"] = [f"no sample folder {self.shown(source.path)} with meta.json: shown without "
+                                         f"video, its actions from {self.shown(index.path)} {where}"]
+        args["extra"]["facts"] = [["video", f"none: the checkout has no folder for this sample; its actions "
+                                            f"and GT are {self.shown(index.path)} {where}"]]
+        return args
+
+    def _compare(self, folder: Path, listed: Listed) -> list[str]:
+        """What to say where a folder's meta.json and its index entry differ (the folder is used)."""
+        index, where = listed.index, listed.index.where(listed.i)
+        entry = index.entries[listed.i]
+        named = f"{self.shown(index.path)} {where}"
+        if not isinstance(entry, dict):
+            return [f"its entry {named} is not an object: {self.shown(folder / 'meta.json')} is used"]
+        differ = differences(read_json_object(folder / "meta.json"), entry)
+        if differ:
+            return [f"{self.shown(folder / 'meta.json')} and {named} differ in {', '.join(differ)}: "
+                    f"the folder's meta.json is used"]
+        return []
 
 
 # ----------------------------------------------------------------------------------------------
@@ -196,22 +343,32 @@ def _autoregressive(path: Path) -> dict[str, Any]:
     )
 
 
-def _single_chunk(path: Path) -> dict[str, Any]:
+def _single_chunk(path: Path, context: dict[str, Any] | None = None, cut_mosaic: bool = True) -> dict[str, Any]:
+    """A sample's folder; ``context``: what an index beside it says of all its samples (the
+    episode, its length, the prompt), where its meta.json does not say."""
     meta_path = path / "meta.json"
-    meta = read_json_object(meta_path)
+    return _chunk_args({**(context or {}), **read_json_object(meta_path)}, meta_path, path, cut_mosaic)
+
+
+def _chunk_args(meta: dict[str, Any], meta_path: Path, path: Path | None, cut_mosaic: bool = True) -> dict[str, Any]:
+    """A single chunk from its meta (a folder's meta.json, or an index entry: ``path`` None, no
+    video); errors name ``meta_path`` and the field."""
     pred = _matrix_field(meta, "actions_pred", meta_path)
     gt = _matrix_field(meta, "actions_gt", meta_path) if "actions_gt" in meta else None
     if gt is not None:
         require(gt.shape == pred.shape, meta_path,
                 f"actions_gt: shape {gt.shape} differs from actions_pred {pred.shape}")
     state_in = meta.get("state_in", meta.get("state"))
-    videos = _split_views(path, "pred_", PRED_MOSAIC)
-    gt_views = _views(path, "gt_", GT_FRONT_ONLY)
-    gt_videos = {v: path / f"gt_{v}.mp4" for v in gt_views}
-    if not gt_videos and (path / GT_FRONT_ONLY).is_file():
+    if path is None:  # an entry of an index: nothing else checks its state
+        state_in = None if state_in is None else _vector_field(state_in, "state_in", meta_path).tolist()
+    videos = _split_views(path, "pred_", PRED_MOSAIC, cut_mosaic) if path is not None else {}
+    gt_views = _views(path, "gt_", GT_FRONT_ONLY) if path is not None else []
+    gt_videos: dict[str, Any] = {v: path / f"gt_{v}.mp4" for v in gt_views} if path is not None else {}
+    if path is not None and not gt_videos and (path / GT_FRONT_ONLY).is_file():
         gt_videos = {"front": path / GT_FRONT_ONLY}
     notes = {}
-    if (path / PRED_MOSAIC).is_file() and (path / GT_FRONT_ONLY).is_file() and "video_psnr_db" in meta:
+    if path is not None and (path / PRED_MOSAIC).is_file() and (path / GT_FRONT_ONLY).is_file() \
+            and "video_psnr_db" in meta:
         notes["video_psnr_db"] = MOSAIC_PSNR_NOTE
     executed = min(9, pred.shape[0])
     frames = _int_field(meta, "predicted_frames", meta_path, default=9)
@@ -228,7 +385,8 @@ def _single_chunk(path: Path) -> dict[str, Any]:
         videos=videos,
         gt_videos=gt_videos,
         gt_episode_length=_length_field(meta, meta_path),
-        extra=_extra(meta, path, initial_state=state_in, reference_notes=notes or None),
+        extra=_extra(meta, path if path is not None else meta_path, initial_state=state_in,
+                     reference_notes=notes or None),
     )
 
 
@@ -242,15 +400,17 @@ def _views(path: Path, prefix: str, mosaic_name: str = "") -> list[str]:
     return views
 
 
-def _split_views(path: Path, prefix: str, mosaic_name: str) -> dict[str, Any]:
+def _split_views(path: Path, prefix: str, mosaic_name: str, cut_mosaic: bool = True) -> dict[str, Any]:
     """Per-view clips: the ``<prefix><view>.mp4`` files, else the 2x2 mosaic cut into views
-    (paths, or frames for the cut views)."""
+    (paths, or frames for the cut views; ``cut_mosaic`` False: the mosaic's path for each view)."""
     views = _views(path, prefix, mosaic_name)
     if views:
         return {v: path / f"{prefix}{v}.mp4" for v in views}
     mosaic = path / mosaic_name
     if not mosaic.is_file():
         return {}
+    if not cut_mosaic:
+        return {view: mosaic for view, _, _ in MOSAIC_VIEWS}
     frames, _ = decode(mosaic)
     h, w = frames.shape[1] // 2, frames.shape[2] // 2
     out = {}
@@ -291,7 +451,8 @@ def check_episode_flag(ds: LeRobotDataset | None, episode: int | None) -> None:
 
 
 def _extra(meta: dict[str, Any], path: Path, **more: Any) -> dict[str, Any]:
-    reference = {k: meta[k] for k in REFERENCE_FIELDS if k in meta}
+    # the source's own figures: a non-finite or non-numeric one is no figure (strict JSON out)
+    reference = {k: meta[k] for k in REFERENCE_FIELDS if k in meta and _is_figure(meta[k])}
     info = {k: meta[k] for k in ("training_task", "prompt_kind", "episode_length", "n_steps",
                                  "total_imagined_frames", "final_imagined_state") if k in meta}
     return {"source": {"format": "dreamzero_so101", "path": str(path.resolve()), "name": path.resolve().name,
@@ -324,13 +485,33 @@ def _matrix_field(meta: dict[str, Any], key: str, path: Path) -> np.ndarray:
     return arr
 
 
+def _vector_field(value: Any, key: str, path: Path) -> np.ndarray:
+    """A joint vector (6 numbers) of an index entry, e.g. its ``state_in``."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise InspectorError(path, f"{key}: expected {len(JOINT_NAMES)} numbers") from None
+    require(arr.shape == (len(JOINT_NAMES),), path, f"{key}: expected shape ({len(JOINT_NAMES)},), found {arr.shape}")
+    check_values(arr, path, f"{key}: ")
+    return arr
+
+
+def _is_figure(value: Any) -> bool:
+    """A finite number, or a list of them (per joint, per step)."""
+    values = value if isinstance(value, list) else [value]
+    try:
+        return all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(float(v)) for v in values)
+    except OverflowError:
+        return False
+
+
 def _length_field(meta: dict[str, Any], path: Path) -> int | None:
     """``episode_length``: absent/null, or a positive integer."""
     value = meta.get("episode_length")
     return None if value is None else whole_number(value, path, "episode_length", minimum=1)
 
 
-def _unique_tag(path: Path, root: Path, used: set[str]) -> str:
+def unique_tag(path: Path, root: Path, used: set[str]) -> str:
     """A valid rollout tag for a source directory, unique among ``used`` (which it joins)."""
     base = tag_from_name(path.name if path != root else root.resolve().name)
     tag, n = base, 2
