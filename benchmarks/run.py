@@ -1239,10 +1239,10 @@ def bench_serve(tmp: Path, quick: bool) -> list[Figure]:
 def bench_rank(tmp: Path, quick: bool) -> list[Figure]:
     """Bradley-Terry intervals' coverage on simulated preferences, and ``inspector rank`` as a whole
     process on 5 sessions with 200 votes in their votes.json."""
-    from inspector.analysis.ranking import rank_sessions, simulate_votes
     from inspector.data.session import SessionWriter
-    from inspector.data.votes import Side, new_vote, save_vote
     from inspector.outcomes import OUTCOMES_FILE, store_records
+    from inspector.said.votes import Side, new_vote, save_vote
+    from inspector.stats.ranking import rank_sessions, simulate_votes
 
     true = np.array([1.5, 0.75, 0.0, -0.75, -1.5])
     rng = np.random.default_rng(0)
@@ -1277,7 +1277,7 @@ def bench_rank(tmp: Path, quick: bool) -> list[Figure]:
                         records[f"t{task}_{i:02d}"] = {"success": bool(rng.random() < (c + 1) / 9)}
             store_records(dest / OUTCOMES_FILE, records, source="file", set_by="bench")
             sides[side].append(str(dest))
-    from inspector.analysis.agreement import Point, agreement, point_statistics
+    from inspector.stats.agreement import Point, agreement, point_statistics
 
     p = rng.uniform(0.05, 0.95, 30)
     q = np.clip(p + rng.normal(0, 0.12, 30), 0.02, 0.98)

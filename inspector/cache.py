@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import importlib.util
 import json
 import os
 import sys
@@ -49,21 +50,24 @@ ENV_DIR = "INSPECTOR_CACHE_DIR"
 # The app's in-memory frame cache (JPEGs sent to browsers, shared by every tab) [MiB].
 DEFAULT_FRAME_CACHE_MB = 256
 SCHEMA = "inspector.metrics-cache/2"
-# The modules whose code decides the cached numbers.
 # What a file written next to ``session.json`` of a session imported in memory is called: the
 # state of each of its rollouts' source files (see :func:`record_import_sources`).
 IMPORTED_FROM = ".inspector-imported-from.json"
-# The modules whose code decides what an import derives from its source.
-_IMPORT_MODULES = ("data/importers/__init__.py", "data/importers/calibration.py",
-                   "data/importers/dreamzero_offline.py", "data/importers/dreamzero_served.py",
-                   "data/importers/dreamzero_so101.py", "data/importers/dreamzero_so101_summaries.py",
-                   "data/importers/groot_dreams.py", "data/importers/lerobot_eval.py", "data/session.py")
-_METRIC_MODULES = ("analysis/metrics.py", "analysis/sweep.py", "analysis/video_metrics.py", "analysis/timeline.py",
-                   "analysis/video_action.py",
-                   "robot/kinematics.py", "units.py", "data/ground_truth.py", "report/rows.py", "data/video.py",
-                   "report/tasks.py",  # tasks.py: which rollouts get SSIM
-                   "analysis/seams.py", "analysis/completion.py", "analysis/coherence.py",
-                   "analysis/video_break.py", "analysis/sanity.py", "analysis/measure_settings.py")
+# The modules whose code decides what an import derives from its source, by import name (a
+# package stands for every module in it: a new importer joins by itself). Each must exist: one
+# renamed or removed fails the fingerprint (:func:`fingerprinted_files`), never drops out of it.
+IMPORT_MODULES = ("inspector.data.importers", "inspector.data.session", "inspector.data.session_model",
+                  "inspector.data.session_arrays", "inspector.data.session_reader", "inspector.data.session_writer",
+                  "inspector._files")
+# The modules whose code decides the cached numbers (the same way).
+METRIC_MODULES = ("inspector.analysis.metrics", "inspector.analysis.sweep", "inspector.analysis.video_metrics",
+                  "inspector.analysis.timeline", "inspector.analysis.video_action", "inspector.robot.kinematics",
+                  "inspector.units", "inspector.data.ground_truth", "inspector.report.rows", "inspector.data.video",
+                  "inspector.report.tasks",  # tasks: which rollouts get SSIM
+                  "inspector.analysis.seams", "inspector.analysis.completion", "inspector.analysis.coherence",
+                  "inspector.analysis.video_break", "inspector.analysis.sanity", "inspector.analysis.measure_settings",
+                  "inspector.analysis.masked_psnr", "inspector.analysis.gripper_track",
+                  "inspector.analysis.camera_measures")
 
 
 def default_dir() -> Path:
@@ -74,10 +78,14 @@ def default_dir() -> Path:
     return Path(base) / "inspector"
 
 
-@functools.lru_cache(maxsize=2)
-def code_fingerprint(modules: tuple[str, ...] = _METRIC_MODULES) -> str:
-    """Package version + the source of ``modules`` (the metric modules), hashed: entries of other
-    code never match."""
+@functools.lru_cache(maxsize=4)
+def code_fingerprint(modules: tuple[str, ...] = METRIC_MODULES) -> str:
+    """Package version + the source of ``modules`` (import names; default the metric modules),
+    hashed: entries of other code never match.
+
+    Raises:
+        ModuleNotFoundError: a module of ``modules`` does not exist (see :func:`fingerprinted_files`).
+    """
     from importlib import metadata
 
     h = hashlib.sha256(SCHEMA.encode())
@@ -85,13 +93,36 @@ def code_fingerprint(modules: tuple[str, ...] = _METRIC_MODULES) -> str:
         h.update(metadata.version("inspector").encode())
     except metadata.PackageNotFoundError:
         pass
-    here = Path(__file__).resolve().parent
+    for name, path in fingerprinted_files(modules):
+        h.update(f"{name}\0".encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def fingerprinted_files(modules: tuple[str, ...]) -> list[tuple[str, Path]]:
+    """(name, source file) of each of ``modules`` (import names), found by the import system
+    without running them; a package: each ``.py`` file under it, by path.
+
+    Raises:
+        ModuleNotFoundError: one of them does not exist (renamed, moved or removed): the list
+            must name the module that now holds its code, or a change there would leave stale
+            entries readable.
+    """
+    files: list[tuple[str, Path]] = []
     for name in modules:
         try:
-            h.update((here / name).read_bytes())
-        except OSError:
-            h.update(name.encode())
-    return h.hexdigest()[:16]
+            spec = importlib.util.find_spec(name)
+        except ModuleNotFoundError:  # its package is gone too
+            spec = None
+        if spec is None or spec.origin is None:
+            raise ModuleNotFoundError(f"the metrics cache's code fingerprint names {name}, which does not exist: "
+                                      "name the module that holds its code now (inspector/cache.py)", name=name)
+        if spec.submodule_search_locations:  # a package: all of it
+            root = Path(spec.origin).parent
+            files += [(f"{name}/{p.relative_to(root).as_posix()}", p) for p in sorted(root.rglob("*.py"))]
+        else:
+            files.append((name, Path(spec.origin)))
+    return files
 
 
 def _file_state(path: Path) -> list[Any]:
@@ -133,6 +164,11 @@ def rollout_key(rollout, gt, limit_margin_deg: float, measures) -> str:
         "limit_margin_deg": float(limit_margin_deg),
         "measures": measures.cache_key(),
     }
+    session = getattr(rollout, "session", None)
+    if session is not None:  # the cameras the arm-masked PSNR and the gripper track were measured through
+        # by content: a temporary import's root (and so its path) is new on every run
+        cameras = getattr(session, "cameras_file", None) or Path(session.root) / "cameras.json"
+        state["cameras"] = _content(Path(cameras))
     return hashlib.sha256(json.dumps(state, sort_keys=True, default=str).encode()).hexdigest()
 
 
@@ -156,7 +192,7 @@ def record_import_sources(session, source: str | Path, dataset: str | Path | Non
         else:
             whole = _tree_state(source) if whole is None else whole
             files = whole
-        state = {"code": code_fingerprint(_IMPORT_MODULES), "source": str(source),
+        state = {"code": code_fingerprint(IMPORT_MODULES), "source": str(source),
                  "dataset": None if dataset is None else str(dataset), "files": files}
         states[tag] = hashlib.sha256(json.dumps(state, sort_keys=True).encode()).hexdigest()
     data = json_text({"schema": SCHEMA, "rollouts": states}).encode()

@@ -17,7 +17,7 @@ from inspector.app._ab_arms import side_origin
 from inspector.app._ab_mode import choose_pair, parse_progress, plan_candidates
 from inspector.app._headless import HeadlessClient
 from inspector.data.session import SessionWriter, open_session
-from inspector.data.votes import Side, new_vote
+from inspector.said.votes import Side, new_vote
 
 
 def _session(dest: Path, rollouts: dict[str, tuple[int, int, str]]):

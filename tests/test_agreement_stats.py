@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from inspector.analysis.agreement import (
+from inspector.stats.agreement import (
     COVERAGE_BY_SIZE,
     MEASURED_COVERAGE,
     Point,

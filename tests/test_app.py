@@ -22,12 +22,12 @@ import simplejpeg
 from browser import wait_until
 
 from inspector.app import HeadlessClient, TabState, serve
-from inspector.app._annotations import read_annotations, update_annotation
 from inspector.app._cards import headline_metrics
 from inspector.app._frames import READY
 from inspector.app._playback_clip import CLIP_STEPS
 from inspector.app._state import ARMS_AFTER_FRAME_S
 from inspector.errors import InspectorError
+from inspector.said.annotations import read_annotations, update_annotation
 
 pytestmark = pytest.mark.slow  # a served app per module and the serve command as a process
 
@@ -535,7 +535,7 @@ def test_playback_swaps_in_clips_of_the_shown_frames_and_back(app):
 def test_a_closed_tab_stops_encoding_its_playback_clips(app, monkeypatch):
     """A tab closed (or paused) while its clips encode stops encoding them: no CPU goes on clips
     no one will see. Each panel's encoding is held at its start until the tab has closed."""
-    import inspector.app._state as state_module
+    import inspector.app._playback as playback_module
     from inspector.app._playback_clip import ASK_EVERY, ClipNotWanted, encode_clip
 
     closed, started, ended = threading.Event(), [], []
@@ -551,7 +551,7 @@ def test_a_closed_tab_stops_encoding_its_playback_clips(app, monkeypatch):
         ended.append("finished")
         return uri
 
-    monkeypatch.setattr(state_module, "encode_clip", encode_once_closed)
+    monkeypatch.setattr(playback_module, "encode_clip", encode_once_closed)
     client, tab = connect(app)
     with client:
         tab.open(key(app, LONG))

@@ -60,9 +60,9 @@ from test_app import (  # noqa: F401  (app and sessions are fixtures)
 from test_app_browser import open_in_page, page_tab
 
 from inspector.app import HeadlessClient, serve
-from inspector.app._annotations import read_annotations, update_annotation
 from inspector.data.sources import check_confined, open_sources
 from inspector.errors import InspectorError
+from inspector.said.annotations import read_annotations, update_annotation
 
 pytestmark = pytest.mark.slow  # browser pages, served apps and commands killed mid-write
 
@@ -702,7 +702,7 @@ def test_share_url_only_on_share(sessions, monkeypatch):  # noqa: F811
 WRITER = r"""
 import json, os, sys, time
 from pathlib import Path
-from inspector.app._annotations import update_annotation
+from inspector.said.annotations import update_annotation
 
 root, tag, start, mode = Path(sys.argv[1]), sys.argv[2], int(sys.argv[3]), sys.argv[4]
 stop = int(sys.argv[5]) if len(sys.argv) > 5 else None

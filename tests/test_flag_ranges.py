@@ -14,8 +14,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from inspector import _flag_values as flag
 from inspector.cli import MAX_BOOTSTRAP, build_parser, main
+from inspector.cli import flags as flag
 from inspector.data.session import MAX_FPS, MIN_FPS
 from inspector.schema import MAX_WHOLE
 

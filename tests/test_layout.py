@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ast
 import importlib
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -22,9 +23,10 @@ REPO = PACKAGE_DIR.parent
 
 # Layers, lowest first: a module may import from its own layer and those below it, never above.
 LAYERS = [
-    {"errors", "units", "schema", "cache", "progress", "_lazy", "_files", "_signals", "_flag_values", "stats"},
+    {"errors", "units", "schema", "cache", "progress", "_lazy", "_files", "_signals", "stats"},
     {"robot"},
     {"data"},
+    {"said"},
     {"outcomes"},
     {"eval"},
     {"analysis"},
@@ -148,6 +150,16 @@ def test_no_private_name_crosses_a_package() -> None:
     assert not crossings, "\n".join(crossings)
 
 
+MAX_MODULE_LINES = 600
+
+
+def test_no_module_is_over_600_lines() -> None:
+    """A module stays small enough to read alone; a longer one is split along its seams."""
+    long = {str(p.relative_to(PACKAGE_DIR)): n for p in PACKAGE_DIR.rglob("*.py")
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES}
+    assert not long, f"modules over {MAX_MODULE_LINES} lines: {long}"
+
+
 def test_few_modules_at_the_top() -> None:
     top = sorted(p.name for p in PACKAGE_DIR.glob("*.py"))
     assert len(top) <= 10, top
@@ -173,3 +185,104 @@ def test_top_level_imports_stay_light() -> None:
             "print(','.join(m for m in ('rerun', 'viser', 'torch', 'inspector.analysis.timeline') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO)
     assert out.stdout.strip() == ""
+
+
+# --- the map: docs/development.md's "Layout of the code" against the package ----------------------
+
+MAP_DOC = REPO / "docs" / "development.md"
+MAP_HEADING = "## Layout of the code"
+MODULE_NAME = re.compile(r"(?<![\w./-])([\w./-]*\w\.py)(?![\w/])")  # errors.py, data/session.py
+FOLDER_NAME = re.compile(r"(?<![\w./-])([A-Za-z_][\w-]*(?:/[\w-]+)*/)(?![\w])")  # stats/, importers/
+
+
+def code_map() -> list[str]:
+    """The lines of the map: the first fenced block under the "Layout of the code" heading."""
+    text = MAP_DOC.read_text(encoding="utf-8")
+    assert MAP_HEADING in text, f"{MAP_DOC} has no {MAP_HEADING!r} section"
+    block = text.split(MAP_HEADING, 1)[1].split("```", 2)
+    assert len(block) == 3, f"{MAP_DOC}: no fenced map under {MAP_HEADING!r}"
+    return block[1].strip("\n").splitlines()
+
+
+def map_floors() -> list[tuple[str, str]]:
+    """The map's floors in order: ``(package, its text)`` for each package of ``inspector/`` (a line
+    indented two spaces that starts with ``name/``, and the more indented lines under it), and
+    ``("", text)`` for the lines naming modules at the package's top. Lines outside ``inspector/``
+    (not indented) come as ``("/", text)``."""
+    floors: list[tuple[str, str]] = []
+    for line in code_map():
+        indent = len(line) - len(line.lstrip(" "))
+        first = line.split()[0] if line.split() else ""
+        if indent == 0:
+            floors.append(("/", line))
+        elif indent == 2 and first.endswith("/"):
+            floors.append((first.rstrip("/"), line))
+        elif indent == 2:
+            floors.append(("", line))
+        else:
+            assert floors, f"map line {line!r} belongs to no floor"
+            floors[-1] = (floors[-1][0], floors[-1][1] + "\n" + line)
+    return floors
+
+
+def packages() -> list[str]:
+    """The top-level packages of ``inspector/`` (a folder with an ``__init__.py``)."""
+    return sorted(p.parent.name for p in PACKAGE_DIR.glob("*/__init__.py"))
+
+
+def test_the_map_names_every_package_and_module() -> None:
+    """Every package and every module file of ``inspector/`` is on the map, a module on its own
+    package's floor (a subpackage's modules on its package's), so a newcomer finds each one there."""
+    floors = map_floors()
+    texts: dict[str, str] = {}
+    for package, text in floors:
+        texts[package] = texts.get(package, "") + "\n" + text
+    missing = [f"{p}/" for p in packages() if p not in texts]
+    for path in sorted(PACKAGE_DIR.rglob("*.py")):
+        rel = path.relative_to(PACKAGE_DIR)
+        floor = rel.parts[0] if len(rel.parts) > 1 else ""
+        named = set(MODULE_NAME.findall(texts.get(floor, ""))) | set(FOLDER_NAME.findall(texts.get(floor, "")))
+        if path.name == "__init__.py":
+            if len(rel.parts) > 2 and f"{rel.parts[-2]}/" not in named:  # a subpackage: by its folder
+                missing.append(str(rel.parent) + "/")
+        elif path.name not in {Path(n).name for n in named}:
+            missing.append(str(rel))
+    assert not missing, f"not on the map in {MAP_DOC.name} ({MAP_HEADING}):\n" + "\n".join(missing)
+
+
+def test_the_map_names_nothing_that_is_not_there() -> None:
+    """Each module the map names, and each folder it lists (a line's first word), exists where the
+    map puts it."""
+    wrong = []
+    for package, text in map_floors():
+        if package == "/":  # outside the package: a path from the repository's root
+            first = text.split()[0]
+            if first != "inspector/" and not (REPO / first).exists():
+                wrong.append(first)
+            continue
+        where = PACKAGE_DIR / package
+        if package and not (where / "__init__.py").is_file():
+            wrong.append(f"{package}/ (no such package)")
+            continue
+        below = {p.name for p in where.rglob("*")} if package else {p.name for p in where.iterdir()}
+        listed = [w for line in text.splitlines() if (w := line.split()[0]).endswith("/")]
+        for name in MODULE_NAME.findall(text) + listed:
+            if "/" in name.rstrip("/"):  # a path: from the package, or from the repository's root
+                if not ((where / name).exists() or (REPO / name).exists() or (PACKAGE_DIR / name).exists()):
+                    wrong.append(f"{package or 'inspector'}: {name}")
+            elif name.rstrip("/") not in below and name != f"{package}/":
+                wrong.append(f"{package or 'inspector'}: {name}")
+    assert not wrong, f"the map in {MAP_DOC.name} names what is not there:\n" + "\n".join(wrong)
+
+
+def test_the_map_floors_follow_the_layers() -> None:
+    """The map lists the packages lowest layer first, as ``LAYERS`` orders them (data flows down)."""
+    order = []
+    for package, text in map_floors():
+        if package == "/":
+            continue
+        names = [package] if package else [Path(n).stem for n in MODULE_NAME.findall(text)
+                                           if "/" not in n and (PACKAGE_DIR / n).is_file()]
+        order += [(layer_of(f"inspector.{name}"), name) for name in names]
+    out_of_order = [f"{b} (layer {lb}) after {a} (layer {la})" for (la, a), (lb, b) in zip(order, order[1:]) if lb < la]
+    assert not out_of_order, "the map's floors are not in LAYERS order:\n" + "\n".join(out_of_order)

@@ -4,7 +4,7 @@
 source directory made from the bundled demo (``dreamzero_layout.py``), the sessions imported from
 it, and the LeRobot-written datasets of ``tests/data/lerobot``.
 
-What "bad input" means, per command (the same words are in ``inspector/cli.py``):
+What "bad input" means, per command (the same words are in ``inspector/cli/__init__.py``):
 
 - ``import``: all or nothing. Any unreadable source rollout (or dataset, with ``--dataset``) is
   exit 2 with one line ``error: <file>: <what>``; nothing is written (no session, no

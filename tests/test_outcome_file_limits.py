@@ -22,10 +22,10 @@ from hypothesis import strategies as st
 
 from inspector._files import read_regular_file
 from inspector.data.session import SessionWriter
-from inspector.data.votes import read_votes, readable_votes, votes_path
 from inspector.errors import InspectorError
 from inspector.outcomes import read_outcome_file
 from inspector.outcomes._import_file import MAX_CELL_CHARS, MAX_FILE_BYTES
+from inspector.said.votes import read_votes, readable_votes, votes_path
 from inspector.schema import MAX_WHOLE
 
 REPO = Path(__file__).resolve().parents[1]

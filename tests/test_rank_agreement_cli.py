@@ -15,8 +15,8 @@ from scipy import stats
 
 from inspector.cli import main
 from inspector.data.session import SessionWriter
-from inspector.data.votes import Side, new_vote, read_votes, save_vote, votes_path
 from inspector.outcomes import OUTCOMES_FILE, store_records
+from inspector.said.votes import Side, new_vote, read_votes, save_vote, votes_path
 
 TASKS = ("pick the cube", "open the drawer")
 CHECKPOINTS = ("ckpt-a", "ckpt-b", "ckpt-c", "ckpt-d")

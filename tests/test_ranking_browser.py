@@ -23,11 +23,11 @@ from browser import SCENE_OFF_SCREEN_JS, app_url, open_page, skip_reason, wait_u
 
 from inspector.app import serve
 from inspector.data.session import SessionWriter
-from inspector.data.votes import read_votes
 from inspector.outcomes import OUTCOMES_FILE, store_records
 from inspector.report.agreement import build_agreement
 from inspector.report.decision_html import write_agreement_html, write_ranking_html
 from inspector.report.ranking import build_ranking
+from inspector.said.votes import read_votes
 
 _reason = skip_reason()
 pytestmark = [pytest.mark.browser, pytest.mark.slow] + ([pytest.mark.skip(reason=_reason)] if _reason else [])

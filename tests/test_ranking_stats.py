@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from scipy import optimize, stats
 
-from inspector.analysis import ranking
-from inspector.analysis.ranking import PRIOR_GAMES, TIE, PairCounts, fit_pairs, fit_strengths, rank_sessions, simulate_votes, win_matrix
+from inspector.stats import ranking
+from inspector.stats.ranking import PRIOR_GAMES, TIE, PairCounts, fit_pairs, fit_strengths, rank_sessions, simulate_votes, win_matrix
 
 TRUE_STRENGTHS = np.array([1.5, 0.75, 0.0, -0.75, -1.5])
 

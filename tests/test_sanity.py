@@ -311,13 +311,13 @@ def test_bad_tolerances_are_one_line(flag, value, what, capsys):
 
 def test_every_command_computing_the_measures_takes_the_tolerances():
     from inspector.analysis.measure_settings import MeasureSettings
-    from inspector.cli import _measures, build_parser
+    from inspector.cli import build_parser, measures
 
     flags = ["--completion-tol-deg", "9", "--completion-tol-mm", "30", "--completion-hold-s", "1",
              "--seam-multiple", "3", "--seam-floor", "4"]
     for command in (["report", "S"], ["compare", "A", "B"], ["serve", "S"], ["export", "S"]):
-        assert _measures(build_parser().parse_args([*command, *flags])) == MeasureSettings(9, 30, 1, 3, 4)
-        assert _measures(build_parser().parse_args(command)) == MeasureSettings()
+        assert measures(build_parser().parse_args([*command, *flags])) == MeasureSettings(9, 30, 1, 3, 4)
+        assert measures(build_parser().parse_args(command)) == MeasureSettings()
 
 
 def test_the_benchmarks_switch_turns_the_measures_off_and_keys_the_cache_apart(monkeypatch):

@@ -330,7 +330,7 @@ def test_written_files_have_the_usual_mode(tmp_path, umask):
     old = os.umask(umask)
     try:
         root = _write_small_session(tmp_path / "s")
-        from inspector.app._annotations import update_annotation
+        from inspector.said.annotations import update_annotation
 
         update_annotation(root, "a", flag=True)
     finally:

@@ -31,8 +31,8 @@ from inspector.data.importers.dreamzero_served import import_served
 from inspector.data.importers.lerobot_eval import import_eval
 from inspector.data.session import SessionWriter, open_session
 from inspector.data.video import VideoClip, encode_h264
-from inspector.data.votes import Side, new_vote, save_vote
 from inspector.outcomes import OUTCOMES_FILE, store_records
+from inspector.said.votes import Side, new_vote, save_vote
 from inspector.schema import NotJsonError, json_text
 
 LEROBOT = Path(__file__).resolve().parent / "data" / "lerobot"

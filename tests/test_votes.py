@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 
 from inspector.data.session import SessionWriter
-from inspector.data.votes import Side, merged_votes, new_vote, read_votes, save_vote, votes_path
 from inspector.errors import InspectorError
+from inspector.said.votes import Side, merged_votes, new_vote, read_votes, save_vote, votes_path
 
 VOTES_PER_WRITER = 25
 
 _WRITER = """
 import sys
-from inspector.data.votes import Side, new_vote, save_vote
+from inspector.said.votes import Side, new_vote, save_vote
 a, b, n, answer = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4]
 for i in range(n):
     save_vote(new_vote(Side(a, "a", "r0"), Side(b, "b", "r0"), answer, note=f"{answer} {i}"))

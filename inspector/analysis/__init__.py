@@ -1,6 +1,9 @@
-"""Metrics and the per-rollout timeline the app, ``report`` and ``export`` share: metric definitions
-(``metrics``), joint metrics for a batch of rollouts (``sweep``), video metrics while clips stream
-(``video_metrics``), and the timeline (``timeline``).
+"""What is measured of a rollout, once, for the app, ``report`` and ``export`` alike: the metrics
+(joint drift, video, video-action agreement), the sanity measures and their tolerances, the
+per-rollout timeline that carries them over time (``timeline``), and ``inspector calibrate``.
+
+Every module, one line each, is on the map in docs/development.md ("Layout of the code"),
+which tests/test_layout.py checks against the package.
 """
 
 from __future__ import annotations

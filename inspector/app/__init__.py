@@ -1,13 +1,13 @@
 """The browser app (viser): ``inspector serve [PATH...]``.
 
-Modules: ``_server`` (serve, InspectorApp), ``_state`` (TabState: one browser tab, and the scrub
-step ``TabState.set_step``), ``_catalog`` (served rollouts and shared per-rollout data),
-``_scene`` (arms, paths, trail), ``_frames`` (background video decoding, JPEG cache),
-``_plots`` (uPlot charts with a cursor), ``_panels`` / ``_cards`` (GUI layout and HTML),
-``_annotations`` (annotations.json under a file lock), ``_ab_mode`` (``serve --ab``: blind A/B
-votes between sessions), ``_robot`` (shared decimated URDF),
-``_headless`` (a browser-less client for tests and benchmarks), ``_host`` (what a tab needs from
-the server and the overview from a tab, as Protocols).
+The server (``_server``) serves a catalog of rollouts (``_catalog``), each computed once and shared
+by every tab; each browser tab is a ``TabState`` (``_state``: open a rollout, the scrub step
+``TabState.set_step``), with its playback, notes, export and readout in modules of their own, the
+Overview of every rollout (``_overview*``), and ``serve --ab``'s blind A/B tab (``_ab_mode``). The
+parts see each other through the Protocols in ``_host``.
+
+Every module, one line each, is on the map in docs/development.md ("Layout of the code"),
+which tests/test_layout.py checks against the package.
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ rollouts' rate while "play arms" is ticked; moving the slider pauses it). The si
 rollout's tag) is sent to the page until the vote is cast: in this mode the
 page holds no picker or overview at all. The evaluator answers A better, B better or tie (keys
 ``A``, ``B``, ``=``), optionally with a progress score [%] for each and a note; the vote is saved
-at once in both sessions' ``votes.json`` (:mod:`inspector.data.votes`), the names of the pair just
+at once in both sessions' ``votes.json`` (:mod:`inspector.said.votes`), the names of the pair just
 judged show beside it for :data:`REVEAL_S`, then the next pair comes and they go. Pairs come least-compared first: the session pair with the
 fewest votes so far (read from disk, so several tabs and processes spread their votes together),
 then its least-voted rollout pair, ties broken at random.
@@ -41,9 +41,9 @@ import numpy as np
 from .._files import not_regular, read_regular_file
 from ..data.ground_truth import resolve_ground_truth
 from ..data.session import Rollout, Session
-from ..data.votes import Side, Vote, new_vote, readable_votes, save_vote
 from ..errors import InspectorError, one_line
 from ..report.svg import Axes, colour_class, legend_html
+from ..said.votes import Side, Vote, new_vote, readable_votes, save_vote
 from ..units import JOINT_NAMES
 from ._ab_arms import PairArms, rollout_scene
 from ._label_ids import LABEL_IDS_HTML

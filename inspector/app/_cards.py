@@ -273,7 +273,8 @@ def video_grid(pairs: Sequence[FramePair], step: int, t_s: float,
         if p.has_imagined:
             caption = "imagined · playing" if (p.view, "imagined") in clips else f"imagined · frame {p.imagined_index}"
             cells.append(_frame_cell(p.view, "imagined", p.imagined, p.status, caption, "#e8590c",
-                                     f"data-frame='{p.imagined_index}'", clips.get((p.view, "imagined")), frame_height))
+                                     f"data-frame='{p.imagined_index}'", clips.get((p.view, "imagined")), frame_height,
+                                     p.imagined_overlay))
             gt_status = p.status if p.status != READY else (LOADING if p.gt_note == LOADING else
                                                              f"no GT frame ({p.gt_note})")
             gt_caption = "ground truth · same time"
@@ -281,7 +282,7 @@ def video_grid(pairs: Sequence[FramePair], step: int, t_s: float,
             gt_status = p.status if p.status != READY else (p.gt_note or LOADING)
             gt_caption = f"camera · frame {p.gt_index}" if p.gt_index is not None else "camera"
         cells.append(_frame_cell(p.view, "gt", p.gt, gt_status, gt_caption, "#2b8a3e", f"data-step='{step}'",
-                                 clips.get((p.view, "gt")), frame_height))
+                                 clips.get((p.view, "gt")), frame_height, p.gt_overlay))
         c = compare.get(p.view)
         if c is not None:
             psnr_c = f" · PSNR {c.psnr_db:.1f} dB" if c.psnr_db is not None else ""
@@ -328,9 +329,11 @@ def frame_height_css(n_rows: int) -> str:
 
 
 def _frame_cell(view: str, kind: str, src: str | None, status: str, caption: str, colour: str, data: str,
-                clip: str | None = None, max_height: str = "none") -> str:
+                clip: str | None = None, max_height: str = "none", overlay: str | None = None) -> str:
     """One frame with its caption, a playing clip, or a grey box saying why there is none; the
-    frame keeps its aspect within ``max_height`` (centred in its cell, the margins left clear)."""
+    frame keeps its aspect within ``max_height`` (centred in its cell, the margins left clear).
+    ``overlay``: a transparent image of the frame's size laid over it (the arms, see ._overlay):
+    the same box and the same ``object-fit`` put it on the frame's pixels."""
     fit = f"width:100%;max-height:{max_height};object-fit:contain;display:block;border-radius:3px"
     if clip is not None:  # muted: browsers autoplay only muted media; canplay: autoplay may not start
         body = (f"<video class='inspector-frame' data-view='{esc(view)}' data-kind='{kind}' src='{clip}' "
@@ -340,6 +343,10 @@ def _frame_cell(view: str, kind: str, src: str | None, status: str, caption: str
     elif src is not None:
         body = (f"<img class='inspector-frame' data-view='{esc(view)}' data-kind='{kind}' {data} src='{src}' "
                 f"style='{fit}'>")
+        if overlay is not None:
+            body = (f"<div style='position:relative'>{body}<img class='inspector-overlay' data-view='{esc(view)}' "
+                    f"data-kind='{kind}' src='{overlay}' style='position:absolute;inset:0;width:100%;height:100%;"
+                    "object-fit:contain;pointer-events:none'></div>")
     else:
         error = status != LOADING and not status.startswith("no GT frame")
         body = (f"<div style='width:100%;aspect-ratio:320/176;max-height:{max_height};display:flex;align-items:center;"

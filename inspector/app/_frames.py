@@ -37,6 +37,7 @@ from ..cache import DEFAULT_FRAME_CACHE_MB
 from ..data.video import fit_size
 from ..errors import InspectorError
 from ._listeners import Listeners, Notifying
+from ._overlay import ArmOverlay
 
 LOADING = "loading"
 READY = "ready"
@@ -122,6 +123,8 @@ class FramePair:
         psnr_db: PSNR of this pair [dB], or None (not computed yet or no GT frame).
         has_imagined: False for a view with GT frames only (a dataset camera).
         gt_index: the GT frame shown, for a view with GT frames only.
+        imagined_overlay, gt_overlay: the arms drawn over each frame (PNG data URIs, see
+            :mod:`._overlay`), or None (not asked for, or the view has no camera).
     """
 
     view: str
@@ -133,6 +136,8 @@ class FramePair:
     psnr_db: float | None = None
     has_imagined: bool = True
     gt_index: int | None = None
+    imagined_overlay: str | None = None
+    gt_overlay: str | None = None
 
 
 _STORE_TOKENS = itertools.count()
@@ -184,6 +189,10 @@ class FrameStore(Notifying):
         self.done = threading.Event()  # ... and every view's PSNR and frame match are known (or failed)
         self.token = next(_STORE_TOKENS)  # names this store's entries in the cache (playback clips)
         self._started = False
+        try:  # the arms drawn into the frames of views with a camera; a bad camera never stops the frames
+            self.overlay: ArmOverlay | None = ArmOverlay.of(timeline)
+        except Exception:
+            self.overlay = None
 
     @property
     def started(self) -> bool:
@@ -257,8 +266,13 @@ class FrameStore(Notifying):
         imagined_key, gt_key = self._keys(view)
         imagined_clips = [tl.rollout.video(view)] if view in self.imagined_views else []
 
+        # the imagined gripper is tracked on the way (a view with a fixed camera)
+        track = self.overlay.tracker_feed(view) if self.overlay is not None and imagined_clips else None
+
         def imagined(_: int, f: int, rgb: npt.NDArray[np.uint8]) -> None:
             self._store(view, (*imagined_key, f), rgb)
+            if track is not None:
+                track(f, rgb)
 
         def gt_frame(i: int, rgb: npt.NDArray[np.uint8]) -> None:
             self._store(view, (*gt_key, i), rgb)
@@ -353,6 +367,20 @@ class FrameStore(Notifying):
                 self.done.set()
         self._notify()
 
+    def gripper_distance(self) -> dict[str, npt.NDArray[np.float64]]:
+        """Per view whose frames are decoded and whose gripper was tracked on the way: the (T,)
+        pixel distance between the tracked and the projected predicted gripper per step."""
+        if self.overlay is None:
+            return {}
+        with self._lock:
+            framed = sorted(self._framed)
+        out = {}
+        for view in framed:
+            series = self.overlay.distance_series(view)
+            if series is not None:
+                out[view] = series
+        return out
+
     def _keys(self, view: str) -> tuple[tuple, tuple]:
         """Cache key prefixes of the view's imagined and GT clips (a GT clip shared by rollouts of
         the same episode and start frame is cached once for all of them)."""
@@ -381,9 +409,21 @@ class FrameStore(Notifying):
             self._cache.put(full_key, jpeg_data_uri(rgb, size))
 
     # -- lookups on the scrub path (never decode) ---------------------------------------------
-    def pair(self, view: str, step: int) -> FramePair:
+    def pair(self, view: str, step: int, overlay: bool = False) -> FramePair:
         """The imagined frame of ``view`` at ``step`` and the GT frame at the same time (a view
-        without imagined video has only the GT frame)."""
+        without imagined video has only the GT frame); ``overlay``: with the arms drawn over them."""
+        out = self._pair(view, step)
+        if overlay and self.overlay is not None and out.status == READY:
+            try:
+                drawn = self.overlay.uris(view, step, out.imagined_index, self.display_size(view))
+            except Exception:  # the frames stand without it
+                drawn = None
+            if drawn is not None:
+                out.imagined_overlay = drawn[0] if out.imagined is not None else None
+                out.gt_overlay = drawn[1] if out.gt is not None else None
+        return out
+
+    def _pair(self, view: str, step: int) -> FramePair:
         tl = self.timeline
         f = tl.frame_index(step)
         out = FramePair(view=view, status=self.status.get(view, LOADING), imagined_index=f,

@@ -1,7 +1,8 @@
 """What the parts of the app need from each other, as Protocols (viser's handles refer back to
-their server the same way): a tab sees the server as an :class:`AppHost`, the overview sees its
-tab as an :class:`OverviewHost`. The server imports the tab and the tab the overview, never the
-other way round, so no import circle forms, and each part names exactly what it uses.
+their server the same way): a tab sees the server as an :class:`AppHost`, the overview and the
+Label panel see their tab as an :class:`OverviewHost`, and the tab's overview as an
+:class:`OverviewView`. The server imports the tab and the tab the overview, never the other way
+round, so no import circle forms, and each part names exactly what it uses.
 """
 
 from __future__ import annotations
@@ -29,8 +30,22 @@ class AppHost(Protocol):
         ...
 
 
+class OverviewView(Protocol):
+    """What a tab's other parts use of its overview (:class:`._overview.OverviewPanel`)."""
+
+    @property
+    def visible(self) -> bool: ...
+
+    @property
+    def shown(self) -> list[Any]:
+        """The rows the overview's table shows, in its order (each has a ``key``)."""
+        ...
+
+    def hide(self, start_frames: bool = True) -> None: ...
+
+
 class OverviewHost(Protocol):
-    """What the overview uses of its tab (:class:`inspector.app.TabState`)."""
+    """What the overview and the Label panel use of their tab (:class:`inspector.app.TabState`)."""
 
     app: AppHost
     client: Any  # viser.ClientHandle
@@ -39,6 +54,11 @@ class OverviewHost(Protocol):
     key: str | None
     closed: threading.Event
     client_id: int
+
+    @property
+    def overview(self) -> OverviewView | None:
+        """The tab's overview; None while the tab is being built (the overview comes last)."""
+        ...
 
     def open(self, key: str) -> bool: ...
 

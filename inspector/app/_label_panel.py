@@ -88,8 +88,8 @@ class LabelPanel:
     def _queue_keys(self) -> list[str]:
         """The rollouts the queue walks: the Overview's current rows (its filter and order) when it
         has drawn some, else every served rollout with a session, in the picker's order."""
-        overview = getattr(self.tab, "overview", None)
-        shown = [r.key for r in getattr(overview, "shown", [])] if overview is not None else []
+        overview = self.tab.overview
+        shown = [r.key for r in overview.shown] if overview is not None else []
         catalog = self.tab.app.catalog
         keys = shown or catalog.keys()
         return [k for k in keys if (e := catalog.get(k)) is not None and e.session is not None and e.error is None]
@@ -149,7 +149,7 @@ class LabelPanel:
         start = keys.index(self.tab.key) + 1 if self.tab.key in keys else 0
         for k in keys[start:] + keys[:start]:
             if k not in labelled and k != self.tab.key:
-                overview = getattr(self.tab, "overview", None)
+                overview = self.tab.overview
                 if overview is not None and overview.visible:
                     overview.hide(start_frames=False)
                 return self.tab.open(k)

@@ -22,7 +22,7 @@ import time
 from dataclasses import replace
 
 from ..errors import InspectorError
-from ._annotations import read_annotations
+from ..said.annotations import read_annotations
 from ._cards import error_card
 from ._host import OverviewHost
 from ._overview_outcomes import row_outcomes, success_rate_html

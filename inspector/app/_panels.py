@@ -87,6 +87,11 @@ class ControlPanel:
 
 ALL_VIEWS = "all views"
 
+OVERLAY_LABEL = "Arms in frames"
+OVERLAY_HINT = ("Draw the predicted arm (orange) and the GT arm (grey) into the frames of each view with a "
+                "camera (cameras.json), with the tracked imagined gripper (cyan) and where the predicted joints "
+                "put it (orange ring). Shown on paused frames.")
+
 
 class VideoPanel:
     """Per camera view, the imagined frame beside the GT frame at the same time (and the compared
@@ -94,6 +99,8 @@ class VideoPanel:
 
     def __init__(self, gui) -> None:
         self.view = gui.add_dropdown("Video", (ALL_VIEWS,), initial_value=ALL_VIEWS)
+        # the predicted (orange) and GT (grey) arms drawn into the frames of views with a camera
+        self.overlay = gui.add_checkbox(OVERLAY_LABEL, False, hint=OVERLAY_HINT, visible=False)
         self.html = gui.add_html("<div>loading…</div>")
         # The page's script writes where its playback clip is here, and hides it (see ._clip_clock).
         self.clock = gui.add_text(CLIP_CLOCK_LABEL, "")
@@ -105,6 +112,11 @@ class VideoPanel:
         if self.view.value not in options:
             self.view.value = ALL_VIEWS
         self.view.visible = len(views) > 1
+
+    def set_overlay_available(self, available: bool) -> None:
+        """Offer the overlay toggle only where a view has a camera."""
+        if self.overlay.visible != available:
+            self.overlay.visible = available
 
     @property
     def selected(self) -> str | None:
@@ -137,6 +149,8 @@ class PlotPanel:
         self._tl: RolloutTimeline | None = None
         self._cmp: RolloutTimeline | None = None
         self._psnr_views: tuple[str, ...] = ()
+        self.gripper_plot: CursorPlot | None = None  # the imagined gripper vs the predicted joints [px]
+        self._gripper_views: tuple[str, ...] = ()
 
     def clear(self) -> None:
         for h in self._handles:
@@ -144,8 +158,9 @@ class PlotPanel:
         for p in self.plots:
             p.handle.remove()
         self._handles, self.plots = [], []
-        self.joint_plot = self.psnr_plot = self.agreement_plot = self.drift_plot = None
+        self.joint_plot = self.psnr_plot = self.agreement_plot = self.drift_plot = self.gripper_plot = None
         self.agreements, self._match_errors, self._frozen = {}, (), {}
+        self._gripper_views = ()
         self._tl = None
 
     def build(self, tl: RolloutTimeline, compare: RolloutTimeline | None,
@@ -387,6 +402,23 @@ class PlotPanel:
         x, lines = self._psnr_xy(psnr)
         self.psnr_plot.set_lines(lines, x=x)
 
+    def set_gripper_distance(self, series: dict[str, np.ndarray]) -> None:
+        """Under the drift plot, per view with a fixed camera: the pixel distance between the
+        gripper tracked through the imagined video and where the predicted joints put it (a gap
+        once the track is lost), added once the view's frames are decoded."""
+        tl = self._tl
+        if tl is None or not series or tuple(sorted(series)) == self._gripper_views or is_video_only(tl):
+            return
+        self._gripper_views = tuple(sorted(series))
+        lines = [Line(f"{view}: tracked − projected", series[view], JOINT_HEX[i % len(JOINT_HEX)], 1.4)
+                 for i, view in enumerate(self._gripper_views)]
+        if self.gripper_plot is not None:
+            self.gripper_plot.set_lines(lines)
+            return
+        ticks = tl.t_s[tl.chunk_start_step[tl.chunk_start_step < tl.n_steps]]
+        with self.tab_drift:
+            self.gripper_plot = self._add(CursorPlot(self._gui, GRIPPER_TITLE, tl.t_s, lines, floor=0.0, ticks=ticks))
+
     def _known_views(self) -> tuple[str, ...]:
         tl = self._tl
         assert tl is not None
@@ -395,6 +427,7 @@ class PlotPanel:
 
 
 AGREEMENT_TITLE = "GT time: imagined video vs predicted joints [s]"
+GRIPPER_TITLE = "Imagined gripper vs predicted joints [px]"
 
 
 def _padded(values: np.ndarray, n: int) -> np.ndarray:

@@ -14,6 +14,10 @@ plot cursors, slider values): the entry point for benchmarks, e.g.::
         tab.set_step(100)
     app.stop()
 
+Its playback (:mod:`._playback`), Notes folder (:mod:`._notes_panel`) and Export button
+(:mod:`._export_action`) are parts it inherits, each in a module of its own that declares what it
+uses of the tab; the step readout is :mod:`._readout`, pure functions of the timeline.
+
 Every GUI callback runs on viser's thread pool; the tab's ``lock`` (re-entrant) serialises them
 with the playback thread and the background frame loader. Programmatic value changes also fire
 viser callbacks (with ``event.client`` None); those are ignored, so only the user's moves act.
@@ -21,44 +25,32 @@ viser callbacks (with ``event.client`` None); those are ignored, so only the use
 
 from __future__ import annotations
 
-import tempfile
 import threading
 import time
-from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
-from viser._gui_api import _build_slider_marks  # what add_slider makes of its marks (see _set_slider_marks)
 
 from ..analysis.metrics import prompt_divergence
 from ..data.session import CHAINED_KINDS
-from ..errors import InspectorError
-from ..units import JOINT_NAMES
-from . import _playback_clip
-from ._annotations import rollout_annotations, update_annotation
-from ._cards import error_card, esc, headline_metrics, rollout_card, unit, video_grid
+from ._cards import error_card, esc, headline_metrics, rollout_card, video_grid
 from ._catalog import Loaded
 from ._clip_clock import ClipClock
+from ._export_action import TabExport
 from ._frames import FramePair
 from ._host import AppHost
 from ._keys import HOTKEYS
 from ._label_panel import LabelPanel
 from ._light_3d import apply_light_3d
+from ._notes_panel import TabNotes
 from ._overview import OverviewPanel
 from ._panels import LEFT_PANEL_PX, NO_COMPARE, RIGHT_PANEL_PX, ControlPanel, PlotPanel, VideoPanel
-from ._playback_clip import CLIP_STEPS, encode_clip
+from ._playback import TabPlayback, _Clip
+from ._readout import limit_text, readout_html
 from ._sanity_card import flagged_seam_steps, sanity_marks, slider_marks
 from ._scene import TabScene
+from ._slider_marks import set_slider_marks
 from ._video_only import is_video_only
-
-PLAYBACK_FPS = 30.0
-NOTES_NEED_A_SESSION = ("<div style='font-size:0.75rem;color:#6b7280'>Notes are kept in a session's "
-                        "annotations.json; a dataset's episodes have none (the dataset is never written to)."
-                        "</div>")
-PLOT_CURSOR_HZ = 10.0
-
 
 # A page drawing WebGL in software (Light 3D ticked) spends ~150 ms on each 3D redraw and shows
 # nothing new meanwhile: a step the user asks for goes out in two messages there, the frames, plot
@@ -67,7 +59,7 @@ PLOT_CURSOR_HZ = 10.0
 ARMS_AFTER_FRAME_S = 0.05
 
 
-class TabState:
+class TabState(TabPlayback, TabNotes, TabExport):
     """Everything one tab shows, and the actions its controls trigger.
 
     Attributes:
@@ -106,6 +98,7 @@ class TabState:
         self._shown_chunk: int | None = None
         self._listener = self._on_frames  # one bound method, so it can be removed again
         self.robot_note = ""
+        self.overview: OverviewPanel | None = None  # built last: it covers the finished tab
 
         catalog = app.catalog
         # Plainly lit before the page draws anything: the environment map only for a page that
@@ -181,7 +174,7 @@ class TabState:
         are computed: the rollout's videos wait (decoding them would take the CPU the rows are
         computed with) until the Overview steps aside or every row is in (:meth:`start_frames`).
         A rollout opened on purpose decodes at once."""
-        overview = getattr(self, "overview", None)  # None while the tab is being built
+        overview = self.overview  # None while the tab is being built
         return overview is not None and overview.visible and not self.app.overview_rows.done.is_set()
 
     def start_frames(self) -> None:
@@ -254,6 +247,7 @@ class TabState:
         c.chunk.visible = c.nav.visible = tl.n_chunks > 1
         cmp = self.compare
         self.video.set_views(loaded.frames.views)
+        self.video.set_overlay_available(loaded.frames.overlay is not None)
         # a video-only rollout has no arm to draw (nor does a video-only compared one)
         self.scene.show(None if is_video_only(tl) else loaded.scene,
                         cmp.scene if cmp is not None and not is_video_only(cmp.timeline) else None)
@@ -267,14 +261,10 @@ class TabState:
             self.label.refresh()
 
     def _set_slider_marks(self, marks: list[tuple[int, str, str]]) -> None:
-        """Flagged seams, completion and video breaks marked on the chunk slider. viser takes a
-        slider's marks as an argument when it adds the slider only; its ``_marks`` prop is what
-        that argument becomes, and assigning it sends the update like any other prop."""
+        """Flagged seams, completion and video breaks marked on the chunk slider."""
         loaded = self.loaded
         assert loaded is not None
-        wanted = _build_slider_marks(slider_marks(loaded.timeline, marks)) or None
-        if self.controls.chunk._marks != wanted:
-            self.controls.chunk._marks = wanted
+        set_slider_marks(self.controls.chunk, slider_marks(loaded.timeline, marks))
 
     def _refresh_marks(self) -> None:
         loaded = self.loaded
@@ -405,19 +395,7 @@ class TabState:
             return self.set_chunk(chunk, 0)
 
     def _limit_text(self, step: int) -> list[str]:
-        tl = self.loaded.timeline  # type: ignore[union-attr]
-        row = tl.limit_violation[step]
-        if not row.any():
-            return [""] * len(JOINT_NAMES)
-        out = []
-        for j, name in enumerate(JOINT_NAMES):
-            if not row[j]:
-                out.append("")
-                continue
-            v, (lo, hi) = tl.pred[step, j], tl.limits[j]
-            u = "" if name == "gripper" or tl.units.arm != "degrees" else "°"
-            out.append(f"⚠ {name} {v:.0f}{u} {'>' if v > hi else '<'} limit {hi if v > hi else lo:.0f}{u}")
-        return out
+        return limit_text(self.loaded.timeline, step)  # type: ignore[union-attr]
 
     def _render_video(self) -> None:
         loaded = self.loaded
@@ -445,7 +423,7 @@ class TabState:
         loaded, cmp = self.loaded, self.compare
         assert loaded is not None
         shown = [v for v in loaded.frames.views if self.video.selected in (None, v)]
-        pairs = [loaded.frames.pair(v, step) for v in shown]
+        pairs = [loaded.frames.pair(v, step, overlay=self.video.overlay.value) for v in shown]
         if cmp is None:
             return pairs, {}
         cmp_step = min(step, cmp.timeline.n_steps - 1)
@@ -458,273 +436,13 @@ class TabState:
         for slider, value in ((c.chunk, chunk), (c.step_in_chunk, within)):
             if slider is not source:
                 self._set_quietly(slider, value)
-        notes = []
-        if tl.post_episode is not None and tl.post_episode[step] or (
-                tl.episode_end_step is not None and step >= tl.episode_end_step):
-            notes.append("<span style='color:#c92a2a'>past the real episode's end</span>")
-        over = [t for t in self._limit_text(step) if t]
-        if over:
-            notes.append(f"<span style='color:#c92a2a'>{esc(' · '.join(over))}</span>")
-        if tl.time_aligned_drift is not None:
-            u = unit(tl)
-            best = f" (best-match {tl.best_match_drift[step]:.1f}{u})" if tl.best_match_drift is not None else ""
-            notes.append(f"{tl.labels.drift} {tl.time_aligned_drift[step]:.1f}{u}{best}")
-        lag = self.plots.lag_text(step)
-        if lag:
-            notes.append(esc(lag))
-        if tl.kind == "episode":
-            where = f"frame {step} / {tl.n_steps - 1}"
-        else:
-            where = (f"step {step} / {tl.n_steps - 1}"
-                     + (f" · chunk {chunk} / {tl.n_chunks - 1}" if tl.n_chunks > 1 else "")
-                     + (f" · imagined frame {tl.frame_index(step)}" if tl.rollout.views else ""))
-        c.readout.content = (
-            f"<div class='inspector-readout' data-step='{step}' style='font-size:0.78rem;line-height:1.4'>"
-            f"t = <b>{tl.t_s[step]:.2f} s</b> · {where}"
-            + (f"<br>{' · '.join(notes)}" if notes else "") + "</div>")
+        c.readout.content = readout_html(tl, step, self.plots.lag_text(step))
         if chunk != self._shown_chunk:
             self._shown_chunk = chunk
             self._show_chunk_notes(chunk)
 
     # ------------------------------------------------------------------------------------------
-    # Playback
-
-    def play(self) -> None:
-        """Start playing from the current step (from the start if at the end)."""
-        with self.lock:
-            if self.playing or self.loaded is None:
-                return
-            if self.step >= self.loaded.timeline.n_steps - 1:
-                self.set_step(0)
-            self.playing = True
-            self._play_generation += 1
-            self.controls.play.label = "Pause"
-            self.controls.play.icon = "player-pause"
-            threading.Thread(target=self._play_loop, args=(self._play_generation,),
-                             name=f"inspector-play-{self.client_id}", daemon=True).start()
-            if _playback_clip.ENABLED:
-                threading.Thread(target=self._play_clips, args=(self._play_generation,),
-                                 name=f"inspector-clip-{self.client_id}", daemon=True).start()
-
-    def pause(self, at_end: bool = False) -> None:
-        """Stop playing. ``at_end``: playback reached the last step; a clip that ends there plays
-        on to its last frame, the last step's (a page that started it late is not cut short)."""
-        with self.lock:
-            if not self.playing:
-                return
-            clip_step = self.clip_clock.step(lead=False) if self._clip is not None else None
-            self.clip_clock.stop()
-            self.playing = False
-            if clip_step is not None and not at_end:  # stop where the page's clip is
-                self.set_step(min(clip_step, cast(Loaded, self.loaded).timeline.n_steps - 1), cursor=False)
-            if self.loaded is not None:  # the cursors may lag a throttled playback step
-                self.plots.set_cursor(float(self.loaded.timeline.t_s[self.step]))
-            self._play_generation += 1
-            self.controls.play.label = "Play"
-            self.controls.play.icon = "player-play"
-            self._next_clip = None
-            # playing implies a loaded rollout (play() needs one; open() pauses before unloading)
-            plays_out = at_end and self._clip is not None and self._clip.end >= cast(Loaded, self.loaded).timeline.n_steps
-            if self.loaded is not None and self._clip is not None and not plays_out:
-                self._render_video()  # the step's frames again, where the clips stopped
-
-    def _play_loop(self, generation: int) -> None:
-        """Advance at ``fps * speed`` steps per second, drawing at most PLAYBACK_FPS times a second;
-        while the page plays a clip and reports it, to the step the clip shows (see ._clip_clock).
-
-        Stops when paused, when the rollout changes, at the last step, or when the tab closes.
-        """
-        last = last_cursor = time.monotonic()
-        budget = 0.0  # fractional steps owed (slow speeds advance less than a step per tick)
-        while not self.closed.wait(1.0 / PLAYBACK_FPS):
-            now = time.monotonic()
-            with self.lock:
-                # closed is set before close() takes the lock: a tick that got the lock first
-                # must not move a closed tab's step
-                if generation != self._play_generation or self.loaded is None or self.closed.is_set():
-                    return
-                tl = self.loaded.timeline
-                clip_step = self.clip_clock.step(now) if self._clip is not None else None
-                if clip_step is not None:  # the clip's clock
-                    budget, last = 0.0, now
-                    target = ClipClock.follow(self.step, clip_step)
-                    if target == self.step:
-                        continue
-                else:  # the server's
-                    budget += (now - last) * tl.fps * self.speed
-                    last = now
-                    n = int(budget)
-                    if n == 0:
-                        continue
-                    budget -= n
-                    target = self.step + n
-                at_end = target >= tl.n_steps - 1
-                # Plot cursors at PLOT_CURSOR_HZ: the arms and video move at the full rate.
-                cursor = at_end or now - last_cursor >= 1.0 / PLOT_CURSOR_HZ
-                last_cursor = now if cursor else last_cursor
-                self.clip_clock.sent(self.set_step(target, cursor=cursor), now)
-                if at_end:
-                    self.pause(at_end=True)
-                    return
-
-    def _play_clips(self, generation: int) -> None:
-        """Get the clips of the segment playback is in (from the frame cache, else encoded), swap
-        them in, then the next segment's, one ahead at most (see :mod:`._playback_clip`). Until
-        the first is ready, and whenever encoding falls behind, images play."""
-        segment = None
-        while True:
-            with self.lock:
-                if generation != self._play_generation or self.loaded is None:
-                    return
-                if segment is None:
-                    segment = self.step // CLIP_STEPS * CLIP_STEPS
-                if segment >= self.loaded.timeline.n_steps:
-                    return
-                clip = _Clip.plan(self, segment, CLIP_STEPS)
-            if clip is None:
-                return
-            try:
-                clip.encode(wanted=lambda: generation == self._play_generation and not self.closed.is_set())
-            except Exception:  # noqa: BLE001 - the images keep playing (or playback ended): nothing is lost
-                return
-            with self.lock:
-                if generation != self._play_generation or not self.playing:
-                    return
-                self._next_clip = clip
-                if clip.shows(self):
-                    self._show_next_clip()
-            # one clip ahead at most: wait until this one is on screen (or passed by)
-            while not self.closed.wait(0.05):
-                with self.lock:
-                    if generation != self._play_generation:
-                        return
-                    if self._next_clip is not clip or self.step >= clip.end:
-                        break
-            segment = clip.end
-
-    def _show_next_clip(self) -> None:
-        """Swap the prepared clip in, starting where playback is now."""
-        clip, self._next_clip = self._next_clip, None
-        assert clip is not None and self.loaded is not None
-        offset_s = (self.step - clip.start) / clip.fps
-        clips = {panel: f"{uri}#t={offset_s:.3f}" for panel, uri in clip.uris.items()}
-        tl = self.loaded.timeline
-        self._clips_shown += 1
-        self._video_html = video_grid(
-            self.pairs, self.step, float(tl.t_s[self.step]), self.compare_pairs,
-            self.compare.timeline.tag if self.compare else None, large=self.video.selected is not None,
-            clips=clips, clip_clock=(clip.start, clip.end, clip.fps, tl.fps), clip_id=self._clips_shown)
-        self.video.html.content = self._video_html
-        self.clip_clock.shown(self._clips_shown, clip.start, clip.end, clip.fps, self.step)
-        self._clip = clip  # last: whoever sees it set finds the page sent the clips
-
-    # ------------------------------------------------------------------------------------------
-    # Notes and export
-
-    def _load_notes(self) -> None:
-        c = self.controls
-        self._notes = {}
-        c.notes_info.content = ""
-        entry = self.app.catalog.get(self.key) if self.key else None
-        if entry is not None and entry.session is None:
-            c.notes_info.content = NOTES_NEED_A_SESSION
-        elif entry is not None:
-            assert entry.session is not None  # the branch above took entries without a session
-            try:
-                self._notes = rollout_annotations(entry.session.root, entry.tag)
-            except InspectorError as exc:
-                c.notes_info.content = error_card("annotations.json is unreadable", exc)
-        self._set_quietly(c.flag_rollout, bool(self._notes.get("flag", False)))
-        self._set_quietly(c.note_rollout, str(self._notes.get("note", "")))
-        self._shown_chunk = None
-
-    def _show_chunk_notes(self, chunk: int) -> None:
-        c = self.controls
-        entry = (self._notes.get("chunks") or {}).get(str(chunk), {})
-        c.flag_chunk.label = f"Flag chunk {chunk}"
-        self._set_quietly(c.flag_chunk, bool(entry.get("flag", False)))
-        self._set_quietly(c.note_chunk, str(entry.get("note", "")))
-        flagged = sorted(int(k) for k, v in (self._notes.get("chunks") or {}).items() if v.get("flag"))
-        if flagged:
-            c.notes_info.content = (f"<div style='font-size:0.75rem'>flagged chunks: "
-                                    f"{esc(', '.join(map(str, flagged)))}</div>")
-
-    def save_notes(self, rollout_flag: bool | None = None, rollout_note: str | None = None,
-                   chunk_flag: bool | None = None, chunk_note: str | None = None) -> bool:
-        """Write the rollout's and the current chunk's flag/note to the session's annotations.json.
-
-        Arguments left None are taken from the Notes controls. Returns True when written.
-        """
-        with self.lock:
-            entry = self.app.catalog.get(self.key) if self.key else None
-            if entry is None or self.loaded is None:
-                return False
-            c = self.controls
-            if entry.session is None:  # a dataset episode: the dataset is never written to
-                c.notes_info.content = NOTES_NEED_A_SESSION
-                return False
-            chunk = self.chunk
-            try:
-                # Only ever <served session>/annotations.json (the root comes from the catalog).
-                if not self.app.sources.serves(entry.session.root):
-                    raise InspectorError(entry.session.root, "not a served session; notes not written")
-                update_annotation(entry.session.root, entry.tag,
-                                  flag=c.flag_rollout.value if rollout_flag is None else rollout_flag,
-                                  note=c.note_rollout.value if rollout_note is None else rollout_note)
-                self._notes = update_annotation(
-                    entry.session.root, entry.tag, chunk=chunk,
-                    flag=c.flag_chunk.value if chunk_flag is None else chunk_flag,
-                    note=c.note_chunk.value if chunk_note is None else chunk_note)
-            except (InspectorError, OSError) as exc:
-                c.notes_info.content = error_card("notes not saved", exc)
-                return False
-            self._shown_chunk = None
-            self._show_time()
-            self._notify("Notes saved", f"{entry.tag}, chunk {chunk} → annotations.json")
-            return True
-
-    def export(self) -> threading.Thread | None:
-        """Write the open rollout's .rrd in a thread and send it to this tab as a download."""
-        with self.lock:
-            loaded = self.loaded
-        if loaded is None:
-            self._notify("Nothing to export", "Open a rollout first.", color="yellow")
-            return None
-        try:
-            from ..export.recording import write_recording  # deferred: rerun takes ~0.6 s to import
-        except ImportError as exc:
-            hint = " Install it: pip install 'inspector[export]'." if getattr(exc, "name", "") == "rerun" else ""
-            self._notify("Export unavailable", f"inspector.export.recording could not be imported ({exc}).{hint}",
-                         color="red")
-            return None
-        tag = loaded.timeline.tag
-        note = self.client.add_notification("Exporting", f"{tag}.rrd …", loading=True, with_close_button=False)
-        self.export_result = None
-
-        def progress(fraction: float, message: str) -> None:
-            note.body = f"{tag}.rrd: {message} ({fraction:.0%})"
-
-        def work() -> None:
-            try:
-                with tempfile.TemporaryDirectory(prefix="inspector-export-") as tmp:
-                    path = Path(tmp) / f"{tag}.rrd"
-                    write_recording(loaded.timeline, path, progress=progress,
-                                    outcome_source=self.app.catalog.outcomes.prefer)
-                    data = path.read_bytes()
-                self.client.send_file_download(f"{tag}.rrd", data, save_immediately=True)
-                note.title, note.body = "Exported", f"{tag}.rrd ({len(data) / 1e6:.1f} MB)"
-                note.color = "green"
-                self.export_result = f"sent {len(data)} bytes"
-            except Exception as exc:  # report, never crash the tab
-                message = " ".join(str(exc).split()) or type(exc).__name__
-                note.title, note.body, note.color = "Export failed", message, "red"
-                self.export_result = f"failed: {message}"
-            note.loading = False
-            note.with_close_button = True
-
-        thread = threading.Thread(target=work, name=f"inspector-export-{self.client_id}", daemon=True)
-        thread.start()
-        return thread
+    # Notifications
 
     def _notify(self, title: str, body: str, color: str | None = None) -> None:
         try:
@@ -743,6 +461,7 @@ class TabState:
             with self.client.atomic():
                 self._render_video()
                 self.plots.update_psnr(self.loaded.frames.psnr, self.loaded.frames.match_errors)
+                self.plots.set_gripper_distance(self.loaded.frames.gripper_distance())
                 self._refresh_marks()  # a view's video break, once its video metrics are known
                 self.plots.set_cursor(float(self.loaded.timeline.t_s[self.step]))
                 self._refresh_card()
@@ -773,6 +492,7 @@ class TabState:
 
         c.picker.on_update(user(lambda e: self._picked(e.target.value)))
         self.video.view.on_update(user(lambda e: self._redraw_video()))
+        self.video.overlay.on_update(user(lambda e: self._redraw_video()))
         self.video.clock.on_update(user(lambda e: self._clip_reported(e.target.value, time.monotonic())))
         # Slider callbacks may run out of order on the pool: read the latest value, not the event's.
         c.chunk.on_update(user(lambda e: self._slider_moved(c.chunk)))
@@ -839,77 +559,3 @@ class TabState:
             self.plots.show_joint(joint)
             if self.loaded is not None:
                 self.plots.set_cursor(float(self.loaded.timeline.t_s[self.step]))
-
-
-class _Clip:
-    """The panels' frames for steps ``start``..``end`` - 1 at the playback rate, and what they
-    were made for (rollout, view selection, compared rollout, speed): a change of any of those
-    goes back to stepping images."""
-
-    def __init__(self, tab: TabState, start: int, end: int, panels: dict[tuple[str, str], list[str]]) -> None:
-        self.start, self.end, self.panels = start, end, panels
-        self.uris: dict[tuple[str, str], str] = {}  # panel -> the clip's video URI, once encoded
-        self.fps = tab.loaded.timeline.fps * tab.speed  # type: ignore[union-attr]
-        self._made_for = self._what(tab)
-        # Clips are kept in the server's frame cache, shared by the tabs showing the rollout (and
-        # the same compared rollout): a second Play of a segment starts at once.
-        frames = tab.loaded.frames  # type: ignore[union-attr]
-        self._cache = frames.cache
-        compare = tab.compare.frames.token if tab.compare is not None else None
-        self._keys = {panel: ("clip", frames.token, compare if panel[1] == "compare" else None, panel,
-                              start, end, round(self.fps, 6)) for panel in panels}
-
-    @staticmethod
-    def _what(tab: TabState) -> tuple:
-        return (tab.loaded, tab.video.selected, tab.compare, tab.speed)
-
-    def shows(self, tab: TabState) -> bool:
-        """Whether the clips still show what the tab would at its step."""
-        loaded, selected, compare, speed = self._made_for
-        return (self.start <= tab.step < self.end and tab.loaded is loaded and tab.compare is compare
-                and tab.video.selected == selected and tab.speed == speed)
-
-    @classmethod
-    def plan(cls, tab: TabState, start: int, steps: int) -> _Clip | None:
-        """The frames each panel shows for ``steps`` steps from ``start``, no further than every
-        panel has a frame at every step; None while frames are loading."""
-        loaded = tab.loaded
-        assert loaded is not None
-        end = min(loaded.timeline.n_steps, start + steps)
-        panels: dict[tuple[str, str], list[str]] = {}
-        for step in range(start, end):
-            pairs, compare_pairs = tab._pairs_at(step)
-            shown: dict[tuple[str, str], str | None] = {}
-            for pair in pairs:
-                if pair.has_imagined:
-                    shown[(pair.view, "imagined")] = pair.imagined
-                shown[(pair.view, "gt")] = pair.gt
-            for view, pair in compare_pairs.items():
-                shown[(view, "compare")] = pair.imagined
-            if step == start:
-                shown = {panel: uri for panel, uri in shown.items() if uri is not None}
-                if not shown:
-                    return None
-                panels = {panel: [] for panel in shown}
-            if any(shown.get(panel) is None for panel in panels):
-                end = step  # a panel loses its frame here (loading, past the episode's end)
-                break
-            for panel in panels:
-                panels[panel].append(shown[panel])  # type: ignore[arg-type]
-        if end - start < 2:
-            return None
-        return cls(tab, start, end, panels)
-
-    def encode(self, wanted: Callable[[], bool] = lambda: True) -> None:
-        """Every panel's clip: from the cache, else encoded (in parallel: the encoder and the JPEG
-        decoder release the GIL) and cached. Stops (:class:`ClipNotWanted`) once ``wanted`` says
-        no: a paused playback or a closed tab leaves nothing encoding for it."""
-        self.uris = {panel: uri for panel in self.panels if (uri := self._cache.get(self._keys[panel])) is not None}
-        todo = {panel: uris for panel, uris in self.panels.items() if panel not in self.uris}
-        if todo:
-            with ThreadPoolExecutor(max_workers=len(todo), thread_name_prefix="inspector-clip") as pool:
-                futures = {panel: pool.submit(encode_clip, uris, self.fps, wanted) for panel, uris in todo.items()}
-                for panel, future in futures.items():
-                    self.uris[panel] = future.result()
-                    self._cache.put(self._keys[panel], self.uris[panel])
-        self.panels = {}  # the JPEGs stay in the frame cache; the clips are what is needed now

@@ -1,7 +1,10 @@
-"""What the inspector reads and writes: native sessions (``session``), LeRobot datasets (``lerobot_dataset``,
-``lerobot_writer``, ``hub``), a dataset episode as a rollout (``episodes``), GT resolution
-(``ground_truth``), video streaming (``video``), other labs' outputs (``importers``), what a
-command-line PATH means (``sources``) and ``inspector info`` (``info``).
+"""What the inspector reads and writes: native sessions (``session``), LeRobot datasets
+(``lerobot_dataset``, written by ``lerobot_writer``), a dataset episode as a rollout
+(``episodes``), GT resolution (``ground_truth``), video streaming (``video``), other labs' outputs
+(``importers``), what a command-line PATH means (``sources``) and ``inspector info`` (``info``).
+
+Every module, one line each, is on the map in docs/development.md ("Layout of the code"),
+which tests/test_layout.py checks against the package.
 """
 
 from __future__ import annotations

@@ -22,7 +22,7 @@ from typing import Final
 
 from ..units import JOINT_NAMES
 from .ground_truth import GroundTruth
-from .importers.groot_dreams import NeuralTrajectories
+from .importers import NeuralTrajectories
 from .lerobot_dataset import INFO_PATH, LeRobotDataset, dataset_name
 from .session import ArrayValue, Rollout
 

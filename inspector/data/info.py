@@ -1,5 +1,6 @@
-"""``inspector info``: what a PATH holds, in whichever layout it is; a directory no layout fits gets
-one line naming the layouts it knows (:data:`.sources.RAW_LAYOUTS`)."""
+"""``inspector info``: what a PATH holds, in whichever layout it is (a session, a LeRobot dataset,
+or a format of the importer registry, :data:`.importers.FORMATS`); a path no layout fits gets one
+line naming the layouts it knows (:func:`.importers.no_layout_fits`)."""
 
 from __future__ import annotations
 
@@ -7,19 +8,17 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InspectorError
-from .importers import dreamzero_offline, dreamzero_served, dreamzero_so101_info, lerobot_eval
-from .importers.groot_dreams import LAYOUT as GROOT_DREAMS
-from .importers.groot_dreams import NeuralTrajectories, describe_layout, format_layout, is_groot_dreams
+from .importers import FORMATS, GROOT_DREAMS, format_named, no_layout_fits
 from .lerobot_dataset import INFO_PATH, LeRobotDataset, is_lerobot_dataset
 from .session import CHAINED_KINDS, is_rollout, is_session, load_rollout, open_session
-from .sources import no_layout_fits
 
 
 def describe(path: Path, calibration: str | None = None) -> dict[str, Any]:
     """A JSON-ready description of a dataset (``format: lerobot``), a session (``session``) or a
     GR00T-Dreams dump (``groot-dreams``, mapped with ``calibration``)."""
-    if path.is_dir() and is_groot_dreams(path):
-        return describe_layout(NeuralTrajectories(path, calibration))
+    trajectories = format_named(GROOT_DREAMS)  # before LeRobot's: a dump holds meta/info.json too
+    if trajectories is not None and trajectories.importer.recognises(path):
+        return trajectories.importer.describe(path, calibration=calibration)
     # meta/info.json present but unreadable: say what is wrong with it, not "neither ... nor"
     if is_lerobot_dataset(path) or ((path / INFO_PATH).is_file() and not is_session(path)):
         ds = LeRobotDataset(path)
@@ -46,14 +45,9 @@ def describe(path: Path, calibration: str | None = None) -> dict[str, Any]:
         return {"format": "session", "rollouts": [_rollout_info(load_rollout(path))]}
     if not path.exists():
         raise InspectorError(path, "not found")
-    if dreamzero_offline.find_runs(path):
-        return dreamzero_offline.describe(path)
-    if lerobot_eval.is_eval_output(path):
-        return lerobot_eval.describe(path)
-    if dreamzero_served.is_served(path):
-        return dreamzero_served.describe(path)
-    if dreamzero_so101_info.is_dreamzero_so101(path):
-        return dreamzero_so101_info.describe(path)
+    for fmt in FORMATS:
+        if fmt is not trajectories and fmt.importer.recognises(path):
+            return fmt.importer.describe(path, calibration=calibration)
     raise no_layout_fits(path)
 
 
@@ -72,16 +66,9 @@ def _dataset_has_episode(r: Any) -> bool:
 
 def format_info(info: dict[str, Any]) -> str:
     """Readable table of :func:`describe`'s output."""
-    if info["format"] == GROOT_DREAMS:
-        return format_layout(info)
-    if info["format"] == dreamzero_offline.FORMAT:
-        return dreamzero_offline.format_description(info)
-    if info["format"] == dreamzero_served.FORMAT:
-        return dreamzero_served.format_description(info)
-    if info["format"] == lerobot_eval.FORMAT:
-        return lerobot_eval.format_description(info)
-    if info["format"] == dreamzero_so101_info.FORMAT:
-        return dreamzero_so101_info.format_description(info)
+    fmt = format_named(info["format"])
+    if fmt is not None:
+        return fmt.importer.format_description(info)
     if info["format"] == "lerobot":
         lines = [f"LeRobot dataset {info['codebase_version']}, {info['robot_type']}, {info['fps']} fps, "
                  f"cameras: {', '.join(info['cameras']) or 'none'}",

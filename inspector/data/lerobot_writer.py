@@ -35,7 +35,7 @@ import numpy.typing as npt
 from ..errors import InspectorError
 from ..schema import json_text
 from ..units import JOINT_NAMES, Units
-from .lerobot_dataset import (
+from .lerobot_format import (
     ACTION_KEY,
     CODEBASE_VERSION_KEY,
     DEFAULT_CHUNKS_SIZE,

@@ -1,8 +1,9 @@
-"""Open whatever a user points at: a session, one rollout of it, or raw DreamZero-SO101 output.
+"""Open whatever a user points at: a session, one rollout of it, or another tool's raw output.
 
 ``report``, ``serve`` and ``export`` all take such paths; they share this one function so a path
-means the same thing everywhere. Raw model output is imported into a temporary session that lives
-as long as the returned :class:`Sources`.
+means the same thing everywhere. Raw output, in any format of the importer registry
+(:data:`.importers.FORMATS`), is imported into a temporary session that lives as long as the
+returned :class:`Sources`.
 
 ``open_sources(..., confine=True)`` (what ``inspector serve`` uses) also refuses, before reading
 them, ``session.json`` and every rollout whose directory or any file in it resolves (through
@@ -20,21 +21,10 @@ from pathlib import Path
 from ..cache import record_import_sources
 from ..errors import InspectorError
 from .cameras import sidecar_path as cameras_sidecar
-from .importers import dreamzero_offline, dreamzero_served, lerobot_eval
-from .importers.dreamzero_so101 import find_sources, load_in_memory
-from .importers.groot_dreams import LAYOUT_HINT as GROOT_DREAMS_HINT
-from .importers.groot_dreams import LAYOUT_TITLE as GROOT_DREAMS_TITLE
-from .importers.groot_dreams import is_groot_dreams, open_trajectories
+from .importers import GROOT_DREAMS, format_named, no_layout_fits, open_trajectories, recognised
 from .lerobot_dataset import INFO_PATH, REPO_ID, dataset_file_roots, find_dataset, is_lerobot_dataset, open_dataset
 from .session import OUTCOMES_SIDECAR_SUFFIX, Rollout, Session, is_rollout, is_session, open_session
 
-# What a PATH may be besides a session, for the error a path none of them fits gets.
-RAW_LAYOUTS = ("a session (session.json)", "a LeRobot dataset (meta/info.json)",
-               f"{GROOT_DREAMS_TITLE} ({GROOT_DREAMS_HINT})",
-               "DreamZero-SO101 evaluation (meta.json + action_trace.npy or actions_pred)",
-               f"{dreamzero_offline.LAYOUT_NAME} ({dreamzero_offline.ACTIONS_CSV})",
-               f"{lerobot_eval.LAYOUT_NAME} ({lerobot_eval.EVAL_INFO})",
-               f"{dreamzero_served.LAYOUT_NAME} ({dreamzero_served.LAYOUT_HINT})")
 BUNDLED_DEMO = Path(__file__).resolve().parents[2] / "sessions" / "demo"
 
 
@@ -130,9 +120,6 @@ def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine
         session.rollouts = {k: v for k, v in session.rollouts.items() if k == keep}
         session.errors = {k: v for k, v in session.errors.items() if k == keep}
     else:
-        if path.is_dir() and is_groot_dreams(path):  # (serve, report and export take it as a dataset)
-            raise InspectorError(path, "a GR00T-Dreams dump is not a session here; import it first: "
-                                       "inspector import groot-dreams PATH -o SESSION")
         session_path, handle, errors = _import_raw(path, dataset)
         out._temps.append(handle)
         session = opened(session_path)
@@ -155,31 +142,20 @@ def _open_one(out: Sources, raw: str | Path, dataset: str | Path | None, confine
 
 def _import_raw(path: Path, dataset: str | Path | None
                 ) -> tuple[Path, tempfile.TemporaryDirectory, dict[str, InspectorError]]:
-    """Import another tool's output at ``path`` into a temporary session, by its layout:
-    (session path, handle to keep alive, {tag: error} of the runs left out)."""
-    if dreamzero_offline.find_runs(path):
-        return dreamzero_offline.load_in_memory(path, dataset=dataset)
-    if lerobot_eval.is_eval_output(path):
-        return lerobot_eval.load_in_memory(path)
-    if dreamzero_served.is_served(path):
-        return dreamzero_served.load_in_memory(path, dataset=dataset)
-    try:
-        find_sources(path)  # raises a clear error when there is nothing to import
-    except InspectorError:
-        raise no_layout_fits(path) from None
-    return load_in_memory(path, dataset=dataset)
-
-
-def no_layout_fits(path: Path) -> InspectorError:
-    """The one line for a directory none of :data:`RAW_LAYOUTS` fits: it names them all."""
-    return InspectorError(path, f"no layout recognised; known: {', '.join(RAW_LAYOUTS)}")
+    """Import another tool's output at ``path`` into a temporary session, by the first format of
+    the registry (:data:`.importers.FORMATS`) it is in: (session path, handle to keep alive,
+    {tag: error} of the runs left out). A GR00T-Dreams dump is refused: it opens as a dataset."""
+    fmt = recognised(path)
+    if fmt is None:
+        raise no_layout_fits(path)
+    return fmt.importer.load_in_memory(path, dataset=dataset)
 
 
 def _open_dataset(out: Sources, raw: str | Path, confine: bool, calibration: str | None = None) -> bool:
     """Open ``raw`` into ``out.datasets`` when it names a LeRobot dataset (or a GR00T-Dreams dump);
     False when it does not."""
     path = Path(os.path.expanduser(raw))
-    if path.is_dir() and is_groot_dreams(path):
+    if _is_trajectories(path):
         root = path.resolve()
         if confine:
             check_confined(root / INFO_PATH, [root])
@@ -210,6 +186,12 @@ def _open_dataset(out: Sources, raw: str | Path, confine: bool, calibration: str
         out.datasets.append(ds)
         out.roots.extend(allowed)
     return True
+
+
+def _is_trajectories(path: Path) -> bool:
+    """A GR00T-Dreams dump: opened as a dataset of trajectories, never imported in memory."""
+    fmt = format_named(GROOT_DREAMS)
+    return fmt is not None and fmt.importer.recognises(path)
 
 
 def check_confined(path: str | Path, roots: Iterable[str | Path]) -> None:

@@ -44,10 +44,10 @@ import numpy.typing as npt
 from .._files import mkstemp_sibling
 from ..data.session import Session, SessionWriter, check_replaceable, open_session
 from ..data.sources import BUNDLED_DEMO
-from ..data.votes import Side, new_vote, save_vote
 from ..errors import InspectorError
 from ..outcomes import import_outcomes, outcomes_path
-from ..outcomes._store import store_records
+from ..said.outcome_store import store_records
+from ..said.votes import Side, new_vote, save_vote
 from ..schema import json_text
 
 CHECKPOINTS = (56000, 64000, 72000)

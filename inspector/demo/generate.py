@@ -71,7 +71,8 @@ def rebuild_demo(out: Path | None = None, quick: bool = False, log: Callable[[st
         The session directory.
     """
     from .cameras import write_scene_cameras
-    from .scene import DemoScene, default_layouts, pick_motion, place_in_bowl_motion  # deferred: MuJoCo
+    from .motions import default_layouts, pick_motion, place_in_bowl_motion  # deferred: MuJoCo
+    from .scene import DemoScene
 
     started = time.perf_counter()
     out = Path(out) if out is not None else DEMO_DIR

@@ -1,6 +1,9 @@
-"""Rerun ``.rrd`` recordings: the recording (``recording``, with ``arms``, ``video``, ``series``,
-``description`` and the blueprint in ``layout``), several written by workers (``jobs``), and the
+"""Rerun ``.rrd`` recordings: one rollout's recording (``recording``, its parts in modules of their
+own and the blueprint in ``layout``), several written by workers (``jobs``), and the
 ``inspector export`` command (``command``).
+
+Every module, one line each, is on the map in docs/development.md ("Layout of the code"),
+which tests/test_layout.py checks against the package.
 """
 
 from __future__ import annotations

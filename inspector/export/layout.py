@@ -154,6 +154,8 @@ class Contents:
         chunks: the rollout has several chunks.
         eye: the 3D view's camera (position, look target) [m].
         joints: the rollout has joints; a video-only one has no 3D view and no joint plots.
+        cameras: views with a camera in the scene (:mod:`inspector.export.cameras`): their frames
+            are shown through it, with the arms projected into them.
     """
 
     views: dict[str, tuple[bool, bool]] = field(default_factory=dict)
@@ -166,6 +168,17 @@ class Contents:
     # the 3D view's eye: (position, look target) [m], fitted to everything drawn
     eye: tuple[tuple[float, float, float], tuple[float, float, float]] = ((0.55, -0.45, 0.4), (0.15, 0.0, 0.1))
     joints: bool = True
+    cameras: list[str] = field(default_factory=list)
+
+
+def _frames_view(view: str, source: str, name: str, through_camera: bool) -> rrb.Spatial2DView:
+    """A view of one video: its frames alone, or, for a view with a camera, the frames under the
+    camera (``/world/cameras/<view>/<source>``) with the arms of the scene projected into them."""
+    if not through_camera:
+        return rrb.Spatial2DView(name=name, origin=f"/{video_path(view, source)}")
+    return rrb.Spatial2DView(name=name, origin=f"/{WORLD}/cameras/{view}",
+                             contents=[f"+ $origin/{source}", f"+ /{WORLD}/**", f"- /{WORLD}/cameras/**",
+                                       f"+ $origin/{source}"])
 
 
 def build_blueprint(contents: Contents) -> rrb.Blueprint:
@@ -213,7 +226,7 @@ def build_blueprint(contents: Contents) -> rrb.Blueprint:
                                        eye_up=(0.0, 0.0, 1.0)),
     )
     pairs = [
-        rrb.Horizontal(*[rrb.Spatial2DView(name=f"{view} {label}", origin=f"/{video_path(view, src)}")
+        rrb.Horizontal(*[_frames_view(view, src, f"{view} {label}", view in contents.cameras)
                          for src, label, present in (("imagined", "imagined", has[0]),
                                                      ("gt", "GT" if has[0] else "camera", has[1]))
                          if present], name=view)

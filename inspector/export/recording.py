@@ -42,6 +42,7 @@ from ..robot.description import VIEW_DIRECTION, bounding_sphere
 from ..robot.kinematics import kinematics
 from . import layout as L
 from .arms import log_arms, prepare_meshes
+from .cameras import log_camera, recording_cameras
 from .description import describe
 from .files import RRD_SUFFIX as RRD_SUFFIX
 from .files import format_size as format_size
@@ -90,6 +91,7 @@ def write_recording(timeline: RolloutTimeline, path: str | Path, views: Sequence
         pred_name=timeline.labels.pred, gt_name=timeline.labels.gt, chunks=timeline.n_chunks > 1,
         eye=eye_fitting(timeline) if timeline.has_joints else L.Contents.eye,
         joints=timeline.has_joints,
+        cameras=[v for v, c in recording_cameras(timeline, views).items() if c.is_fixed or timeline.has_joints],
     )
     # Encoded in memory (a few MB) and written by us: a write error (disk full, permission) is
     # then an ordinary OSError naming the file, not a log line from rerun's writer thread.
@@ -180,13 +182,19 @@ def _log_recording(rec: rr.RecordingStream, tl: RolloutTimeline, views: list[str
         log_psnr(rec, tl, view, series, frames_indexes, L.VIEW_RGBA[i % len(L.VIEW_RGBA)])
         if view in agreements:
             log_video_action(rec, agreements[view], frames_indexes, L.VIEW_RGBA[i % len(L.VIEW_RGBA)])
+    # each view with a camera is a pinhole in the scene, its frames under it (a riding camera is
+    # posed by the predicted arm: none without joints)
+    cameras = {v: c for v, c in recording_cameras(tl, views).items() if c.is_fixed or tl.has_joints}
+    for view, camera in cameras.items():
+        log_camera(rec, tl, view, camera, steps_indexes)
     lo, hi = _VIDEO_ASSETS
     with tempfile.TemporaryDirectory(prefix="inspector-video-") as tmp:
         for i, view in enumerate(views):
             start, span = lo + (hi - lo) * i / len(views), (hi - lo) / len(views)
             report(start, f"video {view}")
             log_view(rec, tl, view, Path(tmp),
-                     progress=cast(Progress, lambda f, v=view, s=start: report(s + span * f, f"encoding GT video {v}")))
+                     progress=cast(Progress, lambda f, v=view, s=start: report(s + span * f, f"encoding GT video {v}")),
+                     under_camera=view in cameras)
 
 
 def application_id(tag: str) -> str:

@@ -20,25 +20,30 @@ from ..analysis.timeline import RolloutTimeline
 from ..data.video import ForwardReader, encode_h264, probe
 from ..errors import InspectorError
 from . import layout as L
+from .cameras import log_camera_frames
 
 PLAYABLE_CODECS = ("h264",)
 Progress = Callable[[float], None]
 
 
 def log_view(rec: rr.RecordingStream, tl: RolloutTimeline, view: str, work_dir: Path,
-             progress: Progress | None = None) -> tuple[int, int]:
-    """Log ``view``'s imagined and GT clips. Returns (imagined frames, GT frames) referenced."""
-    n_imagined = log_imagined(rec, tl, view, work_dir) if view in tl.rollout.views else 0
+             progress: Progress | None = None, under_camera: bool = False) -> tuple[int, int]:
+    """Log ``view``'s imagined and GT clips. Returns (imagined frames, GT frames) referenced.
+
+    ``under_camera``: the view has a camera in the scene; its frames are referenced under it too
+    (:mod:`inspector.export.cameras`), where Rerun projects the arms into them."""
+    n_imagined = log_imagined(rec, tl, view, work_dir, under_camera) if view in tl.rollout.views else 0
     n_gt = 0
     if view in tl.gt.views:
         # a GT-only view (a dataset camera the model does not imagine) follows the imagined
         # frames the rollout would have
         n_frames = n_imagined or tl.n_chunks * tl.rollout.frames_per_chunk
-        n_gt = log_gt(rec, tl, view, work_dir, n_frames, progress)
+        n_gt = log_gt(rec, tl, view, work_dir, n_frames, progress, under_camera)
     return n_imagined, n_gt
 
 
-def log_imagined(rec: rr.RecordingStream, tl: RolloutTimeline, view: str, work_dir: Path) -> int:
+def log_imagined(rec: rr.RecordingStream, tl: RolloutTimeline, view: str, work_dir: Path,
+                 under_camera: bool = False) -> int:
     src = tl.rollout.video_path(view)
     if probe(src).codec not in PLAYABLE_CODECS:
         src = _reencode((rgb for _, rgb in tl.rollout.video(view).iter_frames()), tl.fps,
@@ -49,11 +54,13 @@ def log_imagined(rec: rr.RecordingStream, tl: RolloutTimeline, view: str, work_d
     rec.log(entity, asset, static=True)
     rec.send_columns(entity, frame_indexes(tl, np.arange(len(timestamps))),
                      rr.VideoFrameReference.columns_nanos(timestamps))
+    if under_camera:
+        log_camera_frames(rec, view, "imagined", frame_indexes(tl, np.arange(len(timestamps))), timestamps)
     return len(timestamps)
 
 
 def log_gt(rec: rr.RecordingStream, tl: RolloutTimeline, view: str, work_dir: Path,
-           n_imagined: int, progress: Progress | None = None) -> int:
+           n_imagined: int, progress: Progress | None = None, under_camera: bool = False) -> int:
     """GT of ``view``: a carried H.264 clip as it is (frame i pairs with imagined frame i), else
     the episode frames paired with each imagined frame, streamed into a new H.264 asset."""
     clip = tl.gt.clips[view]
@@ -84,6 +91,8 @@ def log_gt(rec: rr.RecordingStream, tl: RolloutTimeline, view: str, work_dir: Pa
     entity = L.video_path(view, "gt")
     rec.log(entity, asset, static=True)
     rec.send_columns(entity, frame_indexes(tl, shown), rr.VideoFrameReference.columns_nanos(timestamps))
+    if under_camera:
+        log_camera_frames(rec, view, "gt", frame_indexes(tl, shown), timestamps)
     return len(shown)
 
 

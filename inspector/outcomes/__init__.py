@@ -16,10 +16,11 @@ in memory (another tool's output, never written into) keeps them in a sidecar be
 The effective outcome is the first source in :data:`PRECEDENCE` that says anything (success,
 progress or a failure tag); ``--outcome-source`` names one source instead.
 
-Writes follow :mod:`inspector.app._annotations`: read-modify-write under an exclusive
-``fcntl.flock`` on a lock file beside the outcomes file, replaced atomically; concurrent writers
-(two tabs, two app processes) never lose each other's records, and a file that exists but does not
-parse is reported and never overwritten.
+The stored records are kept by :mod:`inspector.said` (``outcome_record``, ``outcome_store``),
+beside annotations and votes: read-modify-write under an exclusive ``fcntl.flock`` on a lock file
+beside the outcomes file, replaced atomically; concurrent writers (two tabs, two app processes)
+never lose each other's records, and a file that exists but does not parse is reported and never
+overwritten.
 
 Layout::
 
@@ -30,38 +31,38 @@ Layout::
 
 from __future__ import annotations
 
+from ..said.outcome_record import FAILURE_TAGS as FAILURE_TAGS
+from ..said.outcome_record import FIELDS as FIELDS
+from ..said.outcome_record import PRECEDENCE as PRECEDENCE
+from ..said.outcome_record import SOURCES as SOURCES
+from ..said.outcome_record import STORED_SOURCES as STORED_SOURCES
+from ..said.outcome_record import OutcomeRecord as OutcomeRecord
+from ..said.outcome_record import OutcomesDocument as OutcomesDocument
+from ..said.outcome_record import Source as Source
+from ..said.outcome_record import check_fields as check_fields
+from ..said.outcome_record import effective_outcome as effective_outcome
+from ..said.outcome_record import make_record as make_record
+from ..said.outcome_record import says_something as says_something
+from ..said.outcome_store import OUTCOMES_FILE as OUTCOMES_FILE
+from ..said.outcome_store import SIDECAR_SUFFIX as SIDECAR_SUFFIX
+from ..said.outcome_store import known_failure_tags as known_failure_tags
+from ..said.outcome_store import outcomes_path as outcomes_path
+from ..said.outcome_store import read_outcomes as read_outcomes
+from ..said.outcome_store import sidecar_path as sidecar_path
+from ..said.outcome_store import store_records as store_records
+from ..said.outcome_store import update_outcome as update_outcome
 from ._command import Imported as Imported
 from ._command import import_outcomes as import_outcomes
 from ._import_file import FileRow as FileRow
 from ._import_file import ImportResult as ImportResult
 from ._import_file import match_rows as match_rows
 from ._import_file import read_outcome_file as read_outcome_file
-from ._record import FAILURE_TAGS as FAILURE_TAGS
-from ._record import FIELDS as FIELDS
-from ._record import PRECEDENCE as PRECEDENCE
-from ._record import SOURCES as SOURCES
-from ._record import STORED_SOURCES as STORED_SOURCES
-from ._record import OutcomeRecord as OutcomeRecord
-from ._record import OutcomesDocument as OutcomesDocument
-from ._record import Source as Source
-from ._record import check_fields as check_fields
-from ._record import effective_outcome as effective_outcome
-from ._record import make_record as make_record
-from ._record import says_something as says_something
 from ._sources import SessionOutcomes as SessionOutcomes
 from ._sources import load_session_outcomes as load_session_outcomes
 from ._sources import recording_outcomes as recording_outcomes
 from ._sources import rollout_sources as rollout_sources
 from ._sources import session_recording_outcomes as session_recording_outcomes
 from ._sources import sim_record as sim_record
-from ._store import OUTCOMES_FILE as OUTCOMES_FILE
-from ._store import SIDECAR_SUFFIX as SIDECAR_SUFFIX
-from ._store import known_failure_tags as known_failure_tags
-from ._store import outcomes_path as outcomes_path
-from ._store import read_outcomes as read_outcomes
-from ._store import sidecar_path as sidecar_path
-from ._store import store_records as store_records
-from ._store import update_outcome as update_outcome
 
 __all__ = [
     "FAILURE_TAGS", "FIELDS", "OUTCOMES_FILE", "PRECEDENCE", "SIDECAR_SUFFIX", "SOURCES", "STORED_SOURCES",

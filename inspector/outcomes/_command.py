@@ -9,8 +9,8 @@ from pathlib import Path
 
 from ..data.sources import open_sources
 from ..errors import InspectorError
+from ..said.outcome_store import known_failure_tags, outcomes_path, read_outcomes, store_records
 from ._import_file import FileRow, iter_outcome_file, match_rows
-from ._store import known_failure_tags, outcomes_path, read_outcomes, store_records
 
 
 @dataclass

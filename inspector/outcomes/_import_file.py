@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING, Any, cast
 from .._files import read_regular_file
 from ..data.session import parse_json_text
 from ..errors import InspectorError
+from ..said.outcome_record import FAILURE_TAGS, check_fields
 from ..schema import MAX_WHOLE, shown, whole_problem
-from ._record import FAILURE_TAGS, check_fields
 
 if TYPE_CHECKING:
     from ..data.session import Rollout

@@ -8,9 +8,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..errors import InspectorError
+from ..said.outcome_record import RECORDING_SUCCESS, SOURCES, OutcomeRecord, OutcomesDocument, make_record
+from ..said.outcome_store import empty_document, outcomes_path, read_outcomes
 from ..schema import shown
-from ._record import RECORDING_SUCCESS, SOURCES, OutcomeRecord, OutcomesDocument, make_record
-from ._store import empty_document, outcomes_path, read_outcomes
 
 if TYPE_CHECKING:
     from ..data.lerobot_dataset import LeRobotDataset

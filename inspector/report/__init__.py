@@ -1,6 +1,10 @@
-"""``inspector report`` and ``compare``: tasks for workers (``tasks``), one row per rollout (``rows``),
-the report (``build``), the HTML page (``html``, ``figures``, ``svg``, ``assets/``) and two
-evaluations side by side (``compare``).
+"""``inspector report``, ``compare``, ``rank`` and ``agreement``: tasks for workers (``tasks``), one
+row per rollout (``rows``), the report as tables or JSON (``build``), the HTML page (``html`` and
+its figures), two evaluations side by side (``compare``), and the decisions between checkpoints
+(``ranking``, ``agreement``).
+
+Every module, one line each, is on the map in docs/development.md ("Layout of the code"),
+which tests/test_layout.py checks against the package.
 """
 
 from __future__ import annotations

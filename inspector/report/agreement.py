@@ -2,7 +2,7 @@
 
 Rollouts are grouped by checkpoint (the session's model, see :func:`model_label`, renamed by
 ``--match``) and task (the prompt); a (checkpoint, task) with judged rollouts on both sides is one
-point. The statistics across points are those of :mod:`inspector.analysis.agreement`. Rollouts of
+point. The statistics across points are those of :mod:`inspector.stats.agreement`. Rollouts of
 the same checkpoint from the same start (task, episode, start frame) on both sides are also paired
 one to one, in tag order, for the confusion table of imagined against real success.
 """
@@ -16,9 +16,9 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ..analysis.agreement import DEFAULT_BOOTSTRAP, MIN_POINTS, STATISTICS, Point, agreement, confusion
 from ..data.session import Session
 from ..errors import InspectorError
+from ..stats.agreement import DEFAULT_BOOTSTRAP, MIN_POINTS, STATISTICS, Point, agreement, confusion
 from .outcome_values import judged, model_label, open_sessions, session_outcomes, task_of
 
 By = Literal["success", "progress"]

@@ -16,8 +16,8 @@ from pathlib import Path
 from typing import Any
 
 from .._files import mkstemp_sibling
-from ..analysis.agreement import STATISTICS
 from ..errors import InspectorError
+from ..stats.agreement import STATISTICS
 from .agreement import _NAMES
 from .html import _asset, _version
 from .svg import CHAR_PX, MARKERS, Axes, colour_class, legend_html

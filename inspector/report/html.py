@@ -34,6 +34,7 @@ from ..units import JOINT_NAMES
 from .episode_figures import episode_figures, episode_key, episode_summary_numbers
 from .figures import Figure, report_figures
 from .html_outcomes import outcome_columns, success_section
+from .overlay_frames import overlay_section
 from .rows import limit_margin, limit_steps
 from .sanity_html import sanity_section
 from .svg import legend_html
@@ -377,7 +378,7 @@ def render_report_html(report: dict[str, Any], title: str | None = None,
             f'<h2>Figures</h2><div class="figures">{figures}</div>'
             f"<h2>Rollouts</h2>{_table_tools(len(rows), 'filter', 'shown', 'filter rows (tag, prompt, kind ...)')}"
             f'<div class="table-wrap">{_table(rows, links)}</div>'
-            + sanity_section(report, figure_html))
+            + sanity_section(report, figure_html) + overlay_section(report, sources))
     if episodes:
         figures = "".join(figure_html(f) for f in episode_figures(episodes))
         body.append(

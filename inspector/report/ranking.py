@@ -1,7 +1,7 @@
 """``inspector rank``: sessions (checkpoints) ranked from blind pairwise votes, or by success rate.
 
 With votes (``votes.json`` in the sessions, written by the app's A/B mode) the ranking is the
-Bradley-Terry fit of :mod:`inspector.analysis.ranking`; without any it is the success rate with its
+Bradley-Terry fit of :mod:`inspector.stats.ranking`; without any it is the success rate with its
 Wilson interval, and the result says so (``method``).
 """
 
@@ -13,10 +13,10 @@ from typing import Any
 
 import numpy as np
 
-from ..analysis.ranking import DEFAULT_BOOTSTRAP, LOSS, TIE, WIN, rank_sessions
 from ..data.session import Session
-from ..data.votes import Vote, merged_votes, votes_path
 from ..errors import InspectorError
+from ..said.votes import Vote, merged_votes, votes_path
+from ..stats.ranking import DEFAULT_BOOTSTRAP, LOSS, TIE, WIN, rank_sessions
 from .outcome_values import judged, model_label, open_sessions, session_labels, session_outcomes
 
 CONFIDENCE = 0.95

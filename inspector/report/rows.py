@@ -16,6 +16,8 @@ import numpy as np
 import numpy.typing as npt
 
 from ..analysis import metrics
+from ..analysis.gripper_track import GripperPixels
+from ..analysis.masked_psnr import MaskedPsnr
 from ..analysis.sanity import CoherenceJson, CompletionJson, LatentsJson, SeamsJson, VideoBreakJson, aggregate_measures, sanity_measures
 from ..analysis.timeline import RolloutTimeline
 from ..analysis.video_action import ViewAgreementJson
@@ -94,6 +96,10 @@ class RolloutRow(TypedDict):
     video_per_chunk: dict[str, VideoPerChunk]  # per view; imagined frame f in chunk f // frames_per_chunk
     video_action: dict[str, ViewAgreementJson] | None  # per view; null with video_action_note saying why
     video_action_note: str | None
+    # per view with GT video: PSNR inside / outside the projected GT arm, and the imagined gripper
+    # tracked against the projected predicted one (analysis/camera_measures.py); null: no camera
+    video_psnr_masked: dict[str, MaskedPsnr | None]
+    gripper_px: dict[str, GripperPixels | None]
     post_episode_chunks: int | None
     gt_source: str
     gt_warning: str | None
@@ -165,13 +171,17 @@ def limit_record(summary: metrics.LimitSummary, margin_deg: float) -> LimitRecor
 
 
 def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics],
-                    imagined_quality: Mapping[str, np.ndarray] | None = None) -> dict[str, Any]:
+                    imagined_quality: Mapping[str, np.ndarray] | None = None,
+                    camera_rows: tuple[dict[str, MaskedPsnr | None], dict[str, GripperPixels | None]] | None = None
+                    ) -> dict[str, Any]:
     """The JSON record of one rollout (fields needing GT joints are null without them).
 
     Args:
         tl: the rollout's timeline.
         video: its video metrics per view (views without GT frames may be left out).
         imagined_quality: per-frame no-reference measures of views without GT video.
+        camera_rows: ``video_psnr_masked`` and ``gripper_px``
+            (:func:`inspector.analysis.camera_measures.view_records`); None: every view null.
     """
     r = tl.rollout
     ce = tl.chunk_errors
@@ -220,6 +230,8 @@ def rollout_summary(tl: RolloutTimeline, video: Mapping[str, VideoMetrics],
                             if vm.mean_psnr_db is not None},
         "video_action": agreement,
         "video_action_note": agreement_note,
+        "video_psnr_masked": camera_rows[0] if camera_rows else {v: None for v in sorted(tl.video_views())},
+        "gripper_px": camera_rows[1] if camera_rows else {v: None for v in sorted(tl.video_views())},
         "post_episode_chunks": post_chunks,
         "gt_source": tl.gt.source,
         "gt_warning": tl.gt.warning,

@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, cast
 
+from ..analysis.camera_measures import ViewCameraPass, cameras_of, feeding, view_records
 from ..analysis.measure_settings import DEFAULT_MEASURES, MeasureSettings
 from ..analysis.measures_switch import sanity_measures_on
 from ..analysis.timeline import batch_key, build_timeline, build_timelines
@@ -27,7 +28,7 @@ from ..analysis.video_metrics import VideoMetrics, compare_clips, resizes_whole_
 from ..cache import MetricsCache, rollout_key, take_unsaid
 from ..data.episodes import episode_rollout, episode_tag
 from ..data.ground_truth import resolve_ground_truth
-from ..data.importers.groot_dreams import NeuralTrajectories, open_trajectories
+from ..data.importers import NeuralTrajectories, open_trajectories
 from ..data.lerobot_dataset import open_dataset
 from ..data.session import CHAINED_KINDS, load_session_rollout, read_session_with_gt
 from ..errors import InspectorError
@@ -337,20 +338,32 @@ def _compute_together(batch: list[_Pending], task: Task, cache) -> list[Outcome]
             if view in tl.video_views() and vm.quality is not None:
                 tl.set_video_metrics(vm)
     views = sorted({v for tl in timelines for v in tl.video_views()})
+    cameras, cameras_note = cameras_of(batch[0].rollout.session)
+    # a view with a camera is read again even where its video metrics are kept: its camera
+    # measures (arm-masked PSNR, the gripper's track) ride on the same pass
+    passes: list[dict[str, ViewCameraPass]] = [{} for _ in timelines]
     for view in views:
-        need = [tl for tl in timelines if view in tl.video_views() and view not in tl.known_video_metrics()]
+        need = [tl for tl in timelines if view in tl.video_views()
+                and (view not in tl.known_video_metrics() or view in cameras)]
         if need:
             gt_clip = need[0].gt.clips[view]
+            fed = [ViewCameraPass(tl, view, cameras[view]) if view in cameras else None for tl in need]
+            for tl, vp in zip(need, fed):
+                if vp is not None:
+                    passes[timelines.index(tl)][view] = vp
             # SSIM (~10x PSNR's cost) where the video is all a rollout has to be judged by
             results = compare_clips(view, [tl.rollout.video(view) for tl in need], gt_clip,
                                     need[0].gt_index_of_frame(view), with_ssim=not need[0].has_joints,
-                                    whole_frame=[resizes_whole_frame(tl.rollout.extra) for tl in need])
+                                    whole_frame=[resizes_whole_frame(tl.rollout.extra) for tl in need],
+                                    on_pair=feeding(fed) if cameras else None)
             for tl, vm in zip(need, results):
                 tl.set_video_metrics(vm)
     outcomes = []
-    for p in batch:
+    for p, fed_views in zip(batch, passes):
         video = p.timeline.known_video_metrics()
-        row = rollout_summary(p.timeline, video, _imagined_only_quality(p.timeline))
+        camera_rows = view_records(fed_views, p.timeline.video_views(), {v: vm.note for v, vm in video.items()},
+                                   cameras_note)
+        row = rollout_summary(p.timeline, video, _imagined_only_quality(p.timeline), camera_rows)
         write_entry(cache, p.key, row, video)
         outcomes.append(Outcome(task.session_root, p.rollout.tag, row=row))
     return outcomes

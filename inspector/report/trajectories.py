@@ -8,7 +8,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..analysis.timeline import RolloutTimeline
-from ..data.importers.groot_dreams import LAYOUT as TRAJECTORY_LAYOUT
+from ..data.importers import GROOT_DREAMS as TRAJECTORY_LAYOUT
 from ..units import JOINT_NAMES
 from .rows import limit_record
 

@@ -27,6 +27,13 @@ against scipy in ``tests/test_stats.py``:
   would be significant with a given power (the normal-approximation sample size for two
   proportions, Fleiss, Levin & Paik 2003, "Statistical Methods for Rates and Proportions", eq. 4.14,
   without continuity correction).
+
+Two modules of statistics across sessions, named by module (not re-exported here: their names
+overlap): :mod:`.ranking`, Bradley-Terry strengths of checkpoints from pairwise votes with
+bootstrap intervals (Bradley & Terry 1952), its fit held to the likelihood's maximum that scipy's
+optimiser finds, and its intervals checked for coverage in ``tests/test_ranking_stats.py``; :mod:`.agreement`, how well success in
+imagination predicts success for real (Pearson, Spearman, Kendall, SIMPLER's MMRV) with basic
+bootstrap intervals, each statistic held to scipy's in ``tests/test_agreement_stats.py``.
 """
 
 from __future__ import annotations

@@ -43,7 +43,8 @@ from ...units import JOINT_NAMES, Units, joint_order
 from ..lerobot_dataset import LeRobotDataset, find_dataset
 from ..session import SessionWriter, check_apart, check_values, fps_problem, read_json_object
 from ..video import VideoClip, encode_h264, probe
-from .dreamzero_so101 import MOSAIC_VIEWS, check_episode_flag, missing_episode, tag_from_name
+from .in_memory import InMemory, import_temporarily
+from .shared import MOSAIC_VIEWS, check_episode_flag, missing_episode, tag_from_name
 
 FORMAT = "dreamzero-offline"
 LAYOUT_NAME = "DreamZero-SO101 offline-inference runs"
@@ -516,30 +517,32 @@ def _unique_tag(path: Path, root: Path, used: set[str]) -> str:
     return tag
 
 
-def load_in_memory(src: str | Path, dataset: str | Path | None = None
-                   ) -> tuple[Path, tempfile.TemporaryDirectory, dict[str, InspectorError]]:
-    """Import into a temporary session (for ``report``/``serve``/``export``); a bad run is left
-    out and returned among the errors, the others are imported.
+def recognises(path: Path) -> bool:
+    """At least one run at or under ``path``."""
+    return bool(find_runs(path))
 
-    Returns:
-        (session_path, handle, errors): keep ``handle`` alive as long as the session is used.
-    """
-    handle = tempfile.TemporaryDirectory(prefix="inspector-session-")
-    dest = Path(handle.name) / Path(src).resolve().name
-    try:
-        _, errors = import_offline(src, dest, dataset=dataset, keep_going=True, log=lambda _: None)
-    except BaseException:
-        handle.cleanup()
-        raise
-    return dest, handle, errors
+
+def import_command(src: str | Path, dest: str | Path, *, overwrite: bool = False, dataset: str | None = None,
+                   episode: int | None = None, start_frame: int | None = None, fps: float | None = None) -> Path:
+    """``inspector import dreamzero-offline SRC -o DEST [--dataset --episode --start-frame --fps]``."""
+    return import_offline(src, dest, dataset=dataset, episode=episode, start_frame=start_frame, fps=fps,
+                          overwrite=overwrite)[0]
+
+
+def load_in_memory(src: Path, dataset: str | Path | None = None) -> InMemory:
+    """Import into a temporary session (for ``report``/``serve``/``export``); a bad run is left
+    out and returned among the errors, the others are imported."""
+    return import_temporarily(Path(src).resolve().name, lambda dest: import_offline(
+        src, dest, dataset=dataset, keep_going=True, log=lambda _: None)[1])
 
 
 # ----------------------------------------------------------------------------------------------
 # info
 
 
-def describe(src: Path) -> dict[str, Any]:
-    """What ``inspector info`` says about the runs under ``src`` (nothing decoded)."""
+def describe(src: Path, calibration: str | None = None) -> dict[str, Any]:
+    """What ``inspector info`` says about the runs under ``src`` (nothing decoded; the runs'
+    joints need no ``calibration``)."""
     runs: list[dict[str, Any]] = []
     errors: dict[str, str] = {}
     used: set[str] = set()

@@ -45,7 +45,8 @@ from ...units import Units
 from ..lerobot_dataset import LeRobotDataset, find_dataset
 from ..session import SessionWriter, check_apart
 from ..video import VideoClip, encode_h264, probe
-from .dreamzero_so101 import MAX_TAG_CHARS, check_episode_flag, tag_from_name
+from .in_memory import InMemory, import_temporarily
+from .shared import MAX_TAG_CHARS, check_episode_flag, tag_from_name
 
 FORMAT = "dreamzero-served"
 LAYOUT_NAME = "DreamZero served predictions"
@@ -223,6 +224,9 @@ def _suffixed(tag: str, suffix: str) -> str:
 
 def is_served(path: Path) -> bool:
     return bool(find_served(path))
+
+
+recognises = is_served
 
 
 # ----------------------------------------------------------------------------------------------
@@ -449,26 +453,30 @@ def import_served(src: str | Path, dest: str | Path, *, views: str | None = None
     return Path(dest), errors
 
 
-def load_in_memory(src: str | Path, dataset: str | Path | None = None
-                   ) -> tuple[Path, tempfile.TemporaryDirectory, dict[str, InspectorError]]:
+def import_command(src: str | Path, dest: str | Path, *, overwrite: bool = False, views: str | None = None,
+                   frames_per_call: int = FRAMES_PER_CALL, open_loop_horizon: int = EXECUTED_PER_CALL,
+                   steps_per_frame: float = STEPS_PER_FRAME, control_hz: float | None = None,
+                   dataset: str | None = None, recording: str | None = None, episode: int | None = None) -> Path:
+    """``inspector import dreamzero-served SRC -o DEST`` with its layout, timing and recording flags."""
+    timing = Timing(frames_per_call=frames_per_call, executed_per_call=open_loop_horizon,
+                    steps_per_frame=steps_per_frame, control_hz=control_hz)
+    return import_served(src, dest, views=views, timing=timing, dataset=dataset, recording=recording,
+                         episode=episode, overwrite=overwrite)[0]
+
+
+def load_in_memory(src: Path, dataset: str | Path | None = None) -> InMemory:
     """Import into a temporary session (``report``/``serve``/``export``) with the default layout
     and timing; bad videos are left out and returned among the errors. ``dataset``: the recording."""
-    handle = tempfile.TemporaryDirectory(prefix="inspector-session-")
-    dest = Path(handle.name) / Path(src).resolve().name.removesuffix(".mp4")
-    try:
-        _, errors = import_served(src, dest, dataset=dataset, keep_going=True, log=lambda _: None)
-    except BaseException:
-        handle.cleanup()
-        raise
-    return dest, handle, errors
+    return import_temporarily(Path(src).resolve().name.removesuffix(".mp4"), lambda dest: import_served(
+        src, dest, dataset=dataset, keep_going=True, log=lambda _: None)[1])
 
 
 # ----------------------------------------------------------------------------------------------
 # info
 
 
-def describe(src: Path) -> dict[str, Any]:
-    """What ``inspector info`` says about served predictions (nothing decoded)."""
+def describe(src: Path, calibration: str | None = None) -> dict[str, Any]:
+    """What ``inspector info`` says about served predictions (nothing decoded; no ``calibration``)."""
     rows, errors = [], {}
     for video in find_served(src):
         try:

@@ -33,11 +33,7 @@ most 128 characters); the directory's own name is kept in ``extra.source.name``.
 
 from __future__ import annotations
 
-import hashlib
 import json
-import re
-import tempfile
-import unicodedata
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,17 +44,17 @@ import numpy as np
 from ...errors import InspectorError, require
 from ...schema import whole_number
 from ...units import JOINT_NAMES, Units
-from ..lerobot_dataset import LeRobotDataset, dataset_name, find_dataset
+from ..lerobot_dataset import LeRobotDataset, find_dataset
 from ..session import SessionWriter, check_apart, check_values, json_too_large, load_array, read_json_object
 from ..video import decode
 from .dreamzero_so101_summaries import INDEX_NAMES, SampleIndex, TrainSummaries, claims_index, differences, distribution_of, read_index, training_dataset
+from .in_memory import InMemory, import_temporarily
+from .shared import MOSAIC_VIEWS, check_episode_flag, join_tag, missing_episode, tag_from_name
 
-MOSAIC_VIEWS = (("front", 0, 0), ("top", 0, 1), ("gripper", 1, 0))  # (view, row, col) of the 2x2
 PRED_MOSAIC = "predicted_video.mp4"
 GT_FRONT_ONLY = "gt_future.mp4"  # beside a mosaic: the front camera alone, not a mosaic
 MOSAIC_PSNR_NOTE = ("compared the whole 2x2 mosaic (front, top, gripper, black) with the front camera "
                     "alone; not a per-view PSNR")
-MAX_TAG_CHARS = 128
 ROLLOUT_VIEW_PREFIX = "rollout_"
 REFERENCE_FIELDS = ("action_rmse_deg", "action_mse_deg2", "per_joint_rmse", "per_step_mse",
                     "video_psnr_db", "video_pixel_mse", "mean_drift_deg", "final_drift_deg")
@@ -204,23 +200,12 @@ def _import(src: str | Path, dest: str | Path, *, dataset: str | Path | None = N
     return Path(dest), errors
 
 
-def load_in_memory(src: str | Path, **kwargs: Any
-                   ) -> tuple[Path, tempfile.TemporaryDirectory, dict[str, InspectorError]]:
+def load_in_memory(src: Path, dataset: str | Path | None = None) -> InMemory:
     """Import into a temporary session (for ``report``/``serve``/``export`` on a raw source dir);
     a bad sample of an ``aggregate.json`` / ``all_metas.json`` is left out and returned among the
-    errors, the others are imported.
-
-    Returns:
-        (session_path, handle, errors): keep ``handle`` alive as long as the session is used.
-    """
-    handle = tempfile.TemporaryDirectory(prefix="inspector-session-")
-    dest = Path(handle.name) / Path(src).resolve().name
-    try:
-        _, errors = _import(src, dest, log=lambda _: None, keep_going=True, **kwargs)
-    except BaseException:
-        handle.cleanup()  # a failed import leaves no temporary directory behind
-        raise
-    return dest, handle, errors
+    errors, the others are imported."""
+    return import_temporarily(Path(src).resolve().name, lambda dest: _import(
+        src, dest, dataset=dataset, log=lambda _: None, keep_going=True)[1])
 
 
 class Checkout:
@@ -437,19 +422,6 @@ def _attach_dataset_gt(args: dict[str, Any], ds: Any, episode: int | None, path:
     return None
 
 
-def missing_episode(ds: LeRobotDataset, index: int) -> str:
-    """Why a rollout naming episode ``index`` of ``ds`` has no GT joints from it."""
-    return f"dataset {dataset_name(ds)} has no episode {index} (episodes {ds.describe_episodes()}): no GT from it"
-
-
-def check_episode_flag(ds: LeRobotDataset | None, episode: int | None) -> None:
-    """Refuse ``--episode N`` that ``ds`` lacks (an episode named by a rollout's own files is a
-    warning instead: that rollout is shown without GT from the dataset)."""
-    if ds is not None and episode is not None and episode not in ds.episode_indexes():
-        raise InspectorError(ds.root, f"episode {episode} is out of range; available: {ds.describe_episodes()} "
-                                      "(--episode)")
-
-
 def _extra(meta: dict[str, Any], path: Path, **more: Any) -> dict[str, Any]:
     # the source's own figures: a non-finite or non-numeric one is no figure (strict JSON out)
     reference = {k: meta[k] for k in REFERENCE_FIELDS if k in meta and _is_figure(meta[k])}
@@ -517,28 +489,10 @@ def unique_tag(path: Path, root: Path, used: set[str]) -> str:
     tag, n = base, 2
     while tag in used:
         parent = tag_from_name(path.parent.name) if path.parent.name else ""
-        tag = _join_tag(parent, base) if n == 2 and parent else _join_tag(base, str(n))
+        tag = join_tag(parent, base) if n == 2 and parent else join_tag(base, str(n))
         n += 1
     used.add(tag)
     return tag
-
-
-def tag_from_name(name: str) -> str:
-    """A valid tag (ASCII letters, digits, ``_.-``, 1-128 characters) made from a directory name:
-    accents dropped (``épisode`` -> ``episode``), other characters -> ``_``, a name too long cut
-    and ended with a hash of the whole name (so two long names stay apart)."""
-    ascii_name = unicodedata.normalize("NFKD", name).encode("ascii", "ignore").decode("ascii")
-    tag = re.sub(r"[^A-Za-z0-9_.-]+", "_", ascii_name).lstrip("._-").rstrip("_")
-    if len(tag) > MAX_TAG_CHARS or not tag:  # too long, or nothing ASCII in it
-        digest = hashlib.sha1(name.encode("utf-8", "surrogateescape")).hexdigest()[:8]
-        tag = _join_tag(tag, digest)
-    return tag
-
-
-def _join_tag(head: str, tail: str) -> str:
-    """``head_tail`` within the tag length, cutting ``head``."""
-    head = head[: MAX_TAG_CHARS - len(tail) - 1].rstrip("._-")
-    return f"{head}_{tail}" if head else tail
 
 
 def _summary(tag: str, args: dict[str, Any]) -> str:

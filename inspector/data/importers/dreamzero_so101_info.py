@@ -1,6 +1,7 @@
-"""``inspector info`` on a DreamZero-SO101 evaluation checkout: each rollout and listed sample as
-the importer would read it (nothing decoded, nothing written), with its distribution and what
-the checkout lacks (a sample listed without its folder is a rollout without video)."""
+"""The DreamZero-SO101 evaluation format as the importer registry sees it: ``inspector info`` on a
+checkout (each rollout and listed sample as the importer would read it, nothing decoded, nothing
+written, with its distribution and what the checkout lacks: a sample listed without its folder is
+a rollout without video), and the entry points of :mod:`.dreamzero_so101`'s import."""
 
 from __future__ import annotations
 
@@ -9,7 +10,9 @@ from typing import Any
 
 from ...errors import InspectorError
 from ...units import Units
-from .dreamzero_so101 import Checkout, find_sources, unique_tag
+from .dreamzero_so101 import Checkout, find_sources, import_dreamzero, load_in_memory, unique_tag
+
+__all__ = ["describe", "format_description", "import_command", "load_in_memory", "recognises"]
 
 FORMAT = "dreamzero-so101"
 LAYOUT_NAME = "DreamZero-SO101 evaluation"
@@ -24,8 +27,18 @@ def is_dreamzero_so101(path: Path) -> bool:
     return True
 
 
-def describe(src: Path) -> dict[str, Any]:
-    """What ``inspector info`` says about the rollouts under ``src``."""
+recognises = is_dreamzero_so101
+
+
+def import_command(src: str | Path, dest: str | Path, *, overwrite: bool = False, dataset: str | None = None,
+                   episode: int | None = None) -> Path:
+    """``inspector import dreamzero-so101 SRC -o DEST [--dataset --episode]``."""
+    return import_dreamzero(src, dest, dataset=dataset, episode=episode, overwrite=overwrite)
+
+
+def describe(src: Path, calibration: str | None = None) -> dict[str, Any]:
+    """What ``inspector info`` says about the rollouts under ``src`` (no ``calibration``: the
+    model's joints are the dataset's)."""
     sources = find_sources(src)
     checkout = Checkout(Path(src), sources)
     rollouts: list[dict[str, Any]] = []

@@ -45,7 +45,8 @@ from ...units import Units
 from ..lerobot_dataset import INFO_PATH, LeRobotDataset
 from ..session import SessionWriter, check_apart, check_json_size
 from ..video import VideoClip, encode_h264, probe
-from .dreamzero_so101 import tag_from_name
+from .in_memory import InMemory, import_temporarily
+from .shared import tag_from_name
 
 FORMAT = "lerobot-eval"
 LAYOUT_NAME = "lerobot-eval outputs"
@@ -98,6 +99,9 @@ class EvalEpisode:
 
 def is_eval_output(path: Path) -> bool:
     return path.is_dir() and (path / EVAL_INFO).is_file()
+
+
+recognises = is_eval_output
 
 
 # ----------------------------------------------------------------------------------------------
@@ -437,26 +441,24 @@ def import_eval(src: str | Path, dest: str | Path, *, overwrite: bool = False, k
     return Path(dest), errors
 
 
-def load_in_memory(src: str | Path, dataset: str | Path | None = None
-                   ) -> tuple[Path, tempfile.TemporaryDirectory, dict[str, InspectorError]]:
+def import_command(src: str | Path, dest: str | Path, *, overwrite: bool = False) -> Path:
+    """``inspector import lerobot-eval SRC -o DEST``."""
+    return import_eval(src, dest, overwrite=overwrite)[0]
+
+
+def load_in_memory(src: Path, dataset: str | Path | None = None) -> InMemory:
     """Import into a temporary session (``report``/``serve``/``export``); bad episodes are left
     out and returned among the errors. ``dataset`` is not used: the recordings carry the arm."""
-    handle = tempfile.TemporaryDirectory(prefix="inspector-session-")
-    dest = Path(handle.name) / Path(src).resolve().name
-    try:
-        _, errors = import_eval(src, dest, keep_going=True, log=lambda _: None)
-    except BaseException:
-        handle.cleanup()
-        raise
-    return dest, handle, errors
+    return import_temporarily(Path(src).resolve().name, lambda dest: import_eval(
+        src, dest, keep_going=True, log=lambda _: None)[1])
 
 
 # ----------------------------------------------------------------------------------------------
 # info
 
 
-def describe(src: Path) -> dict[str, Any]:
-    """What ``inspector info`` says about an output directory (nothing decoded)."""
+def describe(src: Path, calibration: str | None = None) -> dict[str, Any]:
+    """What ``inspector info`` says about an output directory (nothing decoded; no ``calibration``)."""
     episodes, errors, listed = read_eval(src)
     tasks: dict[str, dict[str, Any]] = {t.task: {"task": t.task, "episodes": t.episodes, "successes": t.successes,
                                                  "recorded": 0} for t in listed}

@@ -2,8 +2,8 @@
 
 Several tabs (or several app processes) may write at once, so every change is a read-modify-write
 under an exclusive ``fcntl.flock`` on ``<session>/.annotations.lock``, and the file is replaced
-atomically (``write_json_atomic``): concurrent edits of different entries all survive, and a
-reader never sees half a file. A file that exists but does not parse is never overwritten. A
+atomically (:func:`inspector._files.locked_update`): concurrent edits of different entries all
+survive, and a reader never sees half a file. A file that exists but does not parse is never overwritten. A
 writer killed mid-write leaves the previous file intact and at most a ``.annotations.json.*.tmp``
 behind; the next writer, holding the lock, removes it. An ``annotations.json`` that is a symbolic
 link leading outside the session directory is neither read nor written, and the lock file is
@@ -18,26 +18,20 @@ Layout::
 
 from __future__ import annotations
 
-import contextlib
 import os
-from collections.abc import Iterator
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from .._files import exclusive_lock
-from ..data.session import ANNOTATIONS_FILE, read_json, write_json_atomic
+from .._files import json_bytes, locked_update, read_json, refuse_link_out
+from ..data.session import ANNOTATIONS_FILE
 from ..errors import InspectorError
 
 SCHEMA = "inspector.annotations/1"
 LOCK_FILE = ".annotations.lock"
+# How a refused link's error names where it may lead: the session directory, which the app serves.
+OUTSIDE = "the served roots"
 MAX_NOTE_CHARS = 10_000
-
-
-@contextlib.contextmanager
-def _locked(session_root: Path) -> Iterator[None]:
-    with exclusive_lock(session_root / LOCK_FILE):
-        yield
 
 
 def annotations_path(session_root: str | Path) -> Path:
@@ -48,19 +42,8 @@ def annotations_path(session_root: str | Path) -> Path:
     """
     root = Path(session_root)
     path = root / ANNOTATIONS_FILE
-    if path.is_symlink():
-        target, base = path.resolve(), root.resolve()
-        if not target.is_relative_to(base):
-            raise InspectorError(path, f"resolves outside the served roots (to {target}); "
-                                       "not reading or writing it")
+    refuse_link_out(path, root, outside=OUTSIDE)
     return path
-
-
-def _remove_stale_temps(root: Path) -> None:
-    """Drop what writers killed mid-write left (call holding the lock: no live writer has one)."""
-    for tmp in root.glob(f".{ANNOTATIONS_FILE}.*.tmp"):
-        with contextlib.suppress(OSError):
-            tmp.unlink()
 
 
 def read_annotations(session_root: str | Path) -> dict[str, Any]:
@@ -85,6 +68,11 @@ def read_annotations(session_root: str | Path) -> dict[str, Any]:
     data.setdefault("schema", SCHEMA)
     data.setdefault("rollouts", {})
     return data
+
+
+def _read_path(path: Path) -> dict[str, Any]:
+    """:func:`read_annotations` of the session holding ``path`` (what :func:`locked_update` reads)."""
+    return read_annotations(path.parent)
 
 
 def _check_layout(data: Any) -> None:
@@ -141,11 +129,9 @@ def update_annotation(session_root: str | Path, tag: str, *, chunk: int | None =
     root = Path(session_root)
     if note is not None:
         note = str(note)[:MAX_NOTE_CHARS]
-    annotations_path(root)  # refuse a link out before taking the lock
-    with _locked(root):
-        _remove_stale_temps(root)
-        data = read_annotations(root)
-        entry = data["rollouts"].setdefault(tag, {})
+
+    def change(data: dict[str, Any]) -> dict[str, Any]:
+        entry: dict[str, Any] = data["rollouts"].setdefault(tag, {})
         target = entry if chunk is None else entry.setdefault("chunks", {}).setdefault(str(int(chunk)), {})
         if flag is not None:
             target["flag"] = bool(flag)
@@ -154,5 +140,7 @@ def update_annotation(session_root: str | Path, tag: str, *, chunk: int | None =
         if chunk is not None and not target.get("flag") and not target.get("note"):
             entry["chunks"].pop(str(int(chunk)), None)  # an unflagged, empty chunk needs no entry
         entry["updated"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
-        write_json_atomic(root / ANNOTATIONS_FILE, data)
         return entry
+
+    return locked_update(annotations_path(root), _read_path, change, json_bytes, lock=root / LOCK_FILE,
+                         outside=OUTSIDE)

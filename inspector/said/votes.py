@@ -4,8 +4,10 @@ A vote compares two rollouts of different sessions (checkpoints) from the same s
 written into both sessions' files, so either session carries every comparison it took part in;
 readers merge the files and count a vote once (by its ``id``). Several tabs or app processes may
 vote at once: each write is an append under an exclusive ``fcntl.flock`` on
-``<session>/.votes.lock``, the file replaced atomically (``write_json_atomic``), so no vote is
-lost and no reader sees half a file. A file that exists but does not parse is never overwritten.
+``<session>/.votes.lock``, the file replaced atomically (:func:`inspector._files.locked_update`),
+so no vote is lost and no reader sees half a file. A file that exists but does not parse is never
+overwritten, and a ``votes.json`` that is a symbolic link leading outside its session is neither
+read nor written.
 
 Layout::
 
@@ -22,19 +24,17 @@ outcome records (:mod:`inspector.outcomes`), when given.
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
 import uuid
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from .._files import exclusive_lock
+from .._files import json_bytes, locked_update, read_json, refuse_link_out
 from ..errors import InspectorError
-from .session import read_json, write_json_atomic
 
 VOTES_FILE = "votes.json"
 LOCK_FILE = ".votes.lock"
@@ -70,12 +70,6 @@ class Vote:
                 "b": self.b.to_json(), "note": self.note}
 
 
-@contextlib.contextmanager
-def _locked(session_root: Path) -> Iterator[None]:
-    with exclusive_lock(session_root / LOCK_FILE):
-        yield
-
-
 def votes_path(session_root: str | Path) -> Path:
     return Path(session_root) / VOTES_FILE
 
@@ -90,8 +84,21 @@ def read_votes(session_root: str | Path) -> list[Vote]:
     return [_parse_vote(entry, f"votes[{i}]", path) for i, entry in enumerate(_document(path)["votes"])]
 
 
+def _checked_document(path: Path) -> dict[str, Any]:
+    """:func:`_document`, every vote in it checked (what :func:`save_vote` changes)."""
+    data = _document(path)
+    for i, entry in enumerate(data["votes"]):
+        _parse_vote(entry, f"votes[{i}]", path)
+    return data
+
+
 def _document(path: Path) -> dict[str, Any]:
-    """The file's JSON with a ``votes`` list (an empty document when there is no file)."""
+    """The file's JSON with a ``votes`` list (an empty document when there is no file).
+
+    Raises:
+        InspectorError: the file leads outside its session, or is not an object with a list of votes.
+    """
+    refuse_link_out(path)
     if not os.path.lexists(path):
         return {"schema": SCHEMA, "votes": []}
     data = read_json(path)
@@ -152,17 +159,13 @@ def save_vote(vote: Vote) -> None:
     roots = sorted({Path(vote.a.session), Path(vote.b.session)})
     for root in roots:  # check every file first: a broken one refuses the vote everywhere
         read_votes(root)
-    for root in roots:
-        with _locked(root):
-            for tmp in root.glob(f".{VOTES_FILE}.*.tmp"):  # left by a writer killed mid-write
-                with contextlib.suppress(OSError):
-                    tmp.unlink()
-            read_votes(root)  # re-checked under the lock: another process may have written since
-            path = votes_path(root)
-            data = _document(path)
-            if all(v["id"] != vote.id for v in data["votes"]):
-                data["votes"].append(vote.to_json())
-            write_json_atomic(path, data)
+
+    def append(data: dict[str, Any]) -> None:
+        if all(v["id"] != vote.id for v in data["votes"]):
+            data["votes"].append(vote.to_json())
+
+    for root in roots:  # each re-read and re-checked under its lock: another process may have written since
+        locked_update(votes_path(root), _checked_document, append, json_bytes, lock=root / LOCK_FILE)
 
 
 def merged_votes(session_roots: Sequence[str | Path]) -> list[Vote]:

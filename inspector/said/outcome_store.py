@@ -1,21 +1,23 @@
 """Reading and writing a session's ``outcomes.json`` (or a raw directory's sidecar): locked,
-atomic, and never overwriting a file that does not parse."""
+atomic, and never overwriting a file that does not parse (:func:`inspector._files.locked_update`).
+
+The records and what each field may hold: :mod:`.outcome_record`; where outcomes come from and
+how they are imported: :mod:`inspector.outcomes`."""
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import threading
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
-from .._files import exclusive_lock
-from ..data.session import OUTCOMES_FILE, OUTCOMES_SIDECAR_SUFFIX, parse_json, read_json_bytes, write_bytes_atomic
+from .._files import locked_update, parse_json, read_json_bytes, refuse_link_out
+from ..data.session import OUTCOMES_FILE, OUTCOMES_SIDECAR_SUFFIX
 from ..errors import InspectorError
 from ..schema import json_text, mismatch, shown
-from ._record import (
+from .outcome_record import (
     FAILURE_TAGS,
     FIELDS,
     SCHEMA,
@@ -55,13 +57,6 @@ def outcomes_path(session: Session) -> Path:
     return Path(sidecar) if sidecar is not None else Path(session.root) / OUTCOMES_FILE
 
 
-def _check_link(path: Path) -> None:
-    if os.path.islink(path):  # False, not an error, for a name too long to exist (ENAMETOOLONG)
-        target, base = path.resolve(), path.parent.resolve()
-        if not target.is_relative_to(base):
-            raise InspectorError(path, f"resolves outside its directory (to {target}); not reading or writing it")
-
-
 def empty_document() -> OutcomesDocument:
     return {"schema": SCHEMA, "failure_tags": [], "rollouts": {}}
 
@@ -74,7 +69,7 @@ def read_outcomes(path: str | Path) -> OutcomesDocument:
             it is never overwritten.
     """
     path = Path(path)
-    _check_link(path)
+    refuse_link_out(path)
     if not os.path.lexists(path):
         return empty_document()
     try:
@@ -105,11 +100,14 @@ def _remember_valid(path: Path, raw: bytes) -> None:
         _valid_bytes[path] = raw
 
 
-def _write(path: Path, document: OutcomesDocument) -> None:
-    """Replace the file with ``document`` (valid: read valid, then changed by checked fields)."""
-    raw = encode_document(document)
-    write_bytes_atomic(path, raw)
-    _remember_valid(path, raw)
+def _encoder(path: Path) -> Callable[[OutcomesDocument], bytes]:
+    """The bytes of a changed document (valid: read valid, then changed by checked fields),
+    remembered as valid so that the next read of them skips the check."""
+    def encode(document: OutcomesDocument) -> bytes:
+        raw = encode_document(document)
+        _remember_valid(path, raw)  # before the write: what it holds is valid whether or not it lands
+        return raw
+    return encode
 
 
 def encode_document(document: Mapping[str, Any]) -> bytes:
@@ -159,15 +157,6 @@ def known_failure_tags(document: Mapping[str, Any]) -> tuple[str, ...]:
     return (*FAILURE_TAGS, *(t for t in document.get("failure_tags", []) if t not in FAILURE_TAGS))
 
 
-@contextlib.contextmanager
-def _locked(path: Path) -> Iterator[None]:
-    with exclusive_lock(path.parent / f".{path.name}.lock"):
-        for tmp in path.parent.glob(f".{path.name}.*.tmp"):  # left by a writer killed mid-write
-            with contextlib.suppress(OSError):
-                tmp.unlink()
-        yield
-
-
 def update_outcome(path: str | Path, tag: str, changes: Mapping[str, Any], *, source: Source = "label",
                    set_by: str | None = "app") -> OutcomeRecord | None:
     """Change some fields of one rollout's ``source`` record (a label, by default); the fields
@@ -184,9 +173,8 @@ def update_outcome(path: str | Path, tag: str, changes: Mapping[str, Any], *, so
         InspectorError: the file on disk is not a valid outcomes document (left as it is).
     """
     path = Path(path)
-    _check_link(path)
-    with _locked(path):
-        document = read_outcomes(path)
+
+    def change(document: OutcomesDocument) -> OutcomeRecord | None:
         checked = check_fields(changes, known_failure_tags(document))
         by_source = document["rollouts"].setdefault(tag, {})
         record = cast(dict[str, Any], by_source.get(source) or make_record(source))
@@ -199,8 +187,9 @@ def update_outcome(path: str | Path, tag: str, changes: Mapping[str, Any], *, so
             by_source[source] = cast(OutcomeRecord, record)
         if not by_source:
             document["rollouts"].pop(tag, None)
-        _write(path, document)
         return kept
+
+    return locked_update(path, read_outcomes, change, _encoder(path))
 
 
 def store_records(path: str | Path, records: Mapping[str, Mapping[str, Any]], *, source: Source,
@@ -212,12 +201,12 @@ def store_records(path: str | Path, records: Mapping[str, Mapping[str, Any]], *,
         InspectorError: the file on disk is not a valid outcomes document.
     """
     path = Path(path)
-    _check_link(path)
+    refuse_link_out(path)
     for t in add_tags:
         if not TAG_PATTERN.match(t):
             raise ValueError(f"failure tag {t!r}: lower case letters, digits and _, starting with a letter")
-    with _locked(path):
-        document = read_outcomes(path)
+
+    def change(document: OutcomesDocument) -> None:
         document["failure_tags"] += [t for t in add_tags if t not in known_failure_tags(document)]
         known = known_failure_tags(document)
         at = now_iso()
@@ -225,6 +214,5 @@ def store_records(path: str | Path, records: Mapping[str, Mapping[str, Any]], *,
             record = make_record(source, set_at=at, set_by=set_by)
             cast(dict[str, Any], record).update(check_fields(fields, known))
             document["rollouts"].setdefault(tag, {})[source] = record
-        _write(path, document)
 
-
+    locked_update(path, read_outcomes, change, _encoder(path))
