@@ -26,8 +26,8 @@ written anew.
 The cache is optional. One that cannot be written (a file where its directory should be, a
 read-only file system, a full disk) is said once per command, in one ``warning:`` line, and the
 command goes on without it: :func:`note_unusable` keeps the first failure of a process, printed
-at once in a command's own process; a worker process holds it (:func:`hold_warnings`) and hands
-it back with its results (:func:`take_unsaid`), for the command to print (:func:`warn_once`).
+at once in a command's own process; a worker process holds it and hands it back with its results,
+for the command to print (the warnings channel of :mod:`inspector.progress`).
 """
 
 from __future__ import annotations
@@ -37,18 +37,15 @@ import hashlib
 import importlib.util
 import json
 import os
-import sys
-import threading
 from pathlib import Path
 from typing import Any
 
 from ._files import mkstemp_sibling
 from .errors import one_line
+from .progress import say_once_or_hold
 from .schema import json_text, mismatch
 
 ENV_DIR = "INSPECTOR_CACHE_DIR"
-# The app's in-memory frame cache (JPEGs sent to browsers, shared by every tab) [MiB].
-DEFAULT_FRAME_CACHE_MB = 256
 SCHEMA = "inspector.metrics-cache/2"
 # What a file written next to ``session.json`` of a session imported in memory is called: the
 # state of each of its rollouts' source files (see :func:`record_import_sources`).
@@ -62,8 +59,8 @@ IMPORT_MODULES = ("inspector.data.importers", "inspector.data.session", "inspect
 # The modules whose code decides the cached numbers (the same way).
 METRIC_MODULES = ("inspector.analysis.metrics", "inspector.analysis.sweep", "inspector.analysis.video_metrics",
                   "inspector.analysis.timeline", "inspector.analysis.video_action", "inspector.robot.kinematics",
-                  "inspector.units", "inspector.data.ground_truth", "inspector.report.rows", "inspector.data.video",
-                  "inspector.report.tasks",  # tasks: which rollouts get SSIM
+                  "inspector.units", "inspector.data.ground_truth", "inspector.rows.rollout", "inspector.data.video",
+                  "inspector.rows.tasks",  # tasks: which rollouts get SSIM
                   "inspector.analysis.seams", "inspector.analysis.completion", "inspector.analysis.coherence",
                   "inspector.analysis.video_break", "inspector.analysis.sanity", "inspector.analysis.measure_settings",
                   "inspector.analysis.masked_psnr", "inspector.analysis.gripper_track",
@@ -314,44 +311,9 @@ def _no_constants(name: str) -> None:
 
 # -- one warning per command ------------------------------------------------------------------
 
-_unsaid: str | None = None  # this process's first cache failure, not yet printed or handed on
-_said = False  # this process has printed its warning
-_hold = False  # a worker process: hand failures back instead of printing them
-_lock = threading.Lock()  # the app's threads write entries too
-
 
 def note_unusable(where: str | Path, exc: OSError) -> None:
-    """A cache at ``where`` could not be written: printed at once (the first time in this
-    process), or held for the command if this is a worker process."""
-    global _unsaid
-    with _lock:
-        if _said or _unsaid is not None:
-            return
-        _unsaid = (f"warning: cache {one_line(where)} cannot be written ({one_line(exc.strerror or exc)}); "
-                   "continuing without it")
-    if not _hold:
-        warn_once(take_unsaid())
-
-
-def hold_warnings() -> None:
-    """In a worker process: cache failures are handed back (:func:`take_unsaid`), never printed."""
-    global _hold
-    _hold = True
-
-
-def take_unsaid() -> str | None:
-    """The cache warning this process holds (then no longer), for a worker's results."""
-    global _unsaid
-    with _lock:
-        message, _unsaid = _unsaid, None
-    return message
-
-
-def warn_once(message: str | None) -> None:
-    """Print ``message`` (a cache warning, from this process or a worker's), unless one was printed."""
-    global _said
-    with _lock:
-        if message is None or _said:
-            return
-        _said = True
-    print(message, file=sys.stderr, flush=True)
+    """A cache at ``where`` could not be written: said once per command
+    (:func:`inspector.progress.say_once_or_hold`), by the command even when a worker met it."""
+    say_once_or_hold(f"warning: cache {one_line(where)} cannot be written ({one_line(exc.strerror or exc)}); "
+                     "continuing without it")

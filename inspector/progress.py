@@ -1,8 +1,11 @@
-"""Progress bars of the command line (tqdm, on stderr, only when stderr is a terminal)."""
+"""What a command says while it works, on stderr: progress bars (tqdm, only when stderr is a
+terminal), and the warnings it says once per command even when a worker process met them (a
+worker holds its warning and hands it back with its results, for the command to say)."""
 
 from __future__ import annotations
 
 import sys
+import threading
 from typing import Any, TextIO
 
 
@@ -52,3 +55,47 @@ class FractionBar:
         if self._bar is not None:
             self._bar.close()
             self._bar = None
+
+
+# -- one warning per command ------------------------------------------------------------------
+
+_unsaid: str | None = None  # this process's first warning, not yet printed or handed on
+_said = False  # this process has printed its warning
+_hold = False  # a worker process: hand warnings back instead of printing them
+_lock = threading.Lock()  # the app's threads meet them too
+
+
+def say_once_or_hold(message: str) -> None:
+    """Print ``message`` at once (the first warning in this process), or hold it for the command if
+    this is a worker process (:func:`take_unsaid` hands it back)."""
+    global _unsaid
+    with _lock:
+        if _said or _unsaid is not None:
+            return
+        _unsaid = message
+    if not _hold:
+        warn_once(take_unsaid())
+
+
+def hold_warnings() -> None:
+    """In a worker process: warnings are handed back (:func:`take_unsaid`), never printed."""
+    global _hold
+    _hold = True
+
+
+def take_unsaid() -> str | None:
+    """The warning this process holds (then no longer), for a worker's results."""
+    global _unsaid
+    with _lock:
+        message, _unsaid = _unsaid, None
+    return message
+
+
+def warn_once(message: str | None) -> None:
+    """Print ``message`` (a warning, from this process or a worker's), unless one was printed."""
+    global _said
+    with _lock:
+        if message is None or _said:
+            return
+        _said = True
+    print(message, file=sys.stderr, flush=True)

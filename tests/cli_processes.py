@@ -38,7 +38,7 @@ build_parser()  # (and the modules it reads defaults from)
 # no thread or pool is started before a fork.
 COMPUTING = {"report", "compare", "export", "import", "info"}
 ROW_MODULES = ("av", "pyarrow.parquet", "pyarrow.dataset", "pyarrow.compute",
-               "inspector.report.build", "inspector.report.tasks", "inspector.analysis.sweep",
+               "inspector.report.build", "inspector.rows.tasks", "inspector.analysis.sweep",
                "inspector.analysis.video_metrics", "inspector.analysis.video_break",
                "inspector.robot.kinematics", "inspector.data.sources", "concurrent.futures.process")
 preloaded = False

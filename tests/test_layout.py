@@ -31,6 +31,7 @@ LAYERS = [
     {"eval"},
     {"analysis"},
     {"jobs"},
+    {"rows"},
     {"report"},
     {"export"},
     {"app"},

@@ -113,7 +113,7 @@ def _write_session(root: Path, session_json: bytes, rollout_json: bytes, actions
 def _report_row_or_clean_error(rollout: Any) -> None:
     """The rollout's timeline and report row build, or fail with a one-line InspectorError."""
     from inspector.analysis.timeline import build_timeline
-    from inspector.report.rows import rollout_summary
+    from inspector.rows.rollout import rollout_summary
 
     try:
         tl = build_timeline(rollout)

@@ -30,8 +30,8 @@ from hypothesis import strategies as st
 from inspector.cache import SCHEMA, decode_entry
 from inspector.data.video import VideoClip, encode_h264
 from inspector.report.build import FIELDS_SET_AFTER_CACHE
-from inspector.report.entries import MetricsEntry, is_consistent
-from inspector.report.rows import RolloutRow
+from inspector.rows.entries import MetricsEntry, is_consistent
+from inspector.rows.rollout import RolloutRow
 from inspector.schema import mismatch
 
 pytestmark = pytest.mark.slow  # the CLI as processes
@@ -148,7 +148,7 @@ def test_every_row_written_is_a_rollout_row_and_reads_back_as_written(warm_cache
 def _tasks(session: Path, cache: Path, jobs: int) -> list:
     from inspector.data.sources import open_sources
     from inspector.report.build import DEFAULT_LIMIT_MARGIN_DEG
-    from inspector.report.tasks import plan_tasks
+    from inspector.rows.tasks import plan_tasks
 
     sources = open_sources([session], lazy=True)
     try:
@@ -161,7 +161,7 @@ def test_a_fully_cached_report_starts_no_workers(session: Path, warm_cache: Path
     """Every row in the cache: the report reads them itself, with no process started for it."""
     import multiprocessing
 
-    from inspector.report.tasks import run_tasks
+    from inspector.rows.tasks import run_tasks
 
     tasks = _tasks(session, warm_cache, jobs=2)
     assert len(tasks) >= 2  # what would take a pool of two
@@ -177,7 +177,7 @@ def test_a_fully_cached_report_starts_no_workers(session: Path, warm_cache: Path
 
 def test_a_report_looks_up_until_its_first_miss(session: Path, warm_cache: Path, tmp_path: Path) -> None:
     """What is left after the first rollout missing from the cache goes to the workers, untouched."""
-    from inspector.report.tasks import found_in_cache
+    from inspector.rows.tasks import found_in_cache
 
     cache = tmp_path / "cache"
     shutil.copytree(warm_cache, cache)
@@ -322,7 +322,7 @@ def _use(entry: dict[str, Any]) -> None:
     """What the report does with a cached row and what export does with cached video metrics."""
     from inspector.analysis.video_metrics import VideoMetrics
     from inspector.report.build import format_report
-    from inspector.report.rows import aggregate
+    from inspector.rows.rollout import aggregate
 
     for record in entry["video"].values():
         VideoMetrics.from_json(record).mean_psnr_db  # noqa: B018 - computing it is the check
@@ -537,7 +537,7 @@ def test_the_schema_check_says_where_a_value_departs(warm_cache: Path) -> None:
 def test_joint_coherence_without_a_joints_offset_is_a_miss(warm_cache: Path) -> None:
     """Its readers look up the offset of every joint they call out of phase: an entry without
     one (a joint dropped, or its offset null) is inconsistent, never read."""
-    from inspector.report.entries import is_consistent
+    from inspector.rows.entries import is_consistent
     from inspector.units import JOINT_NAMES
 
     coherent = [e for e in map(read_back, entry_files(warm_cache)) if e and e["row"] and e["row"]["joint_coherence"]]

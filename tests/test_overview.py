@@ -45,7 +45,7 @@ from inspector.data.session import SessionWriter
 from inspector.data.sources import BUNDLED_DEMO, open_sources
 from inspector.jobs.pool import default_jobs
 from inspector.outcomes import make_record, store_records
-from inspector.report.tasks import plan_tasks
+from inspector.rows.tasks import plan_tasks
 from inspector.units import DEFAULT_LIMIT_MARGIN_DEG
 
 DOCS_SCREENSHOT = Path(__file__).resolve().parents[1] / "docs" / "overview.png"
@@ -102,7 +102,7 @@ def test_rows_are_computed_once_then_listed_from_the_cache(tmp_path, monkeypatch
     assert rows["tempo_0.8x"].summary["tempo"] == pytest.approx(0.8, abs=0.05)
 
     # A second app on the same cache lists every row without computing any.
-    import inspector.report.tasks as report_jobs
+    import inspector.rows.tasks as report_jobs
 
     def no_computing(*args, **kwargs):
         raise AssertionError("a cached row was computed again")

@@ -29,7 +29,7 @@ from demo_copies import demo_copy
 from inspector.errors import InspectorError
 from inspector.report.build import FIELDS_SET_AFTER_CACHE as AFTER_CACHE
 from inspector.report.build import build_report
-from inspector.report.tasks import Task, rollouts_per_task, run_task, run_tasks_on_ray
+from inspector.rows.tasks import Task, rollouts_per_task, run_task, run_tasks_on_ray
 
 ray = pytest.importorskip("ray", reason="Ray is an optional extra: pip install -e '.[ray]'")
 
@@ -37,7 +37,7 @@ from test_export import rrd_verify  # noqa: E402
 
 from inspector.export.command import export_cli  # noqa: E402
 from inspector.jobs.ray import NICENESS_ENV, check_address, import_ray, ray_workers, worker_env  # noqa: E402
-from inspector.report.tasks import bundle_tasks  # noqa: E402
+from inspector.rows.tasks import bundle_tasks  # noqa: E402
 
 pytestmark = pytest.mark.slow
 

@@ -24,8 +24,8 @@ from inspector.data.session import SessionWriter
 from inspector.data.video import VideoClip, encode_h264
 from inspector.errors import InspectorError
 from inspector.report.build import build_report
-from inspector.report.rows import prompt_pairs
-from inspector.report.tasks import Task, run_task
+from inspector.rows.rollout import prompt_pairs
+from inspector.rows.tasks import Task, run_task
 
 pytestmark = pytest.mark.slow  # large sessions through the CLI
 

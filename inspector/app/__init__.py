@@ -20,7 +20,11 @@ if TYPE_CHECKING:
     from ._server import InspectorApp, serve
     from ._state import TabState
 
-__all__ = ["HeadlessClient", "InspectorApp", "TabState", "serve"]
+__all__ = ["DEFAULT_FRAME_CACHE_MB", "HeadlessClient", "InspectorApp", "TabState", "serve"]
+
+# The in-memory frame cache (JPEGs sent to browsers, shared by every tab) [MiB]: here, in the
+# package's face, so that the command line's --cache-mb default costs no import of viser.
+DEFAULT_FRAME_CACHE_MB = 256
 
 # Imported when first asked for: a module of the app that needs none of viser (the annotations
 # file, the Overview's table) is then imported without it, in a second instead of two.

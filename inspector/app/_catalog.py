@@ -30,7 +30,7 @@ from ..data.lerobot_dataset import dataset_name
 from ..data.session import Rollout, Session
 from ..data.sources import Sources, check_confined
 from ..errors import InspectorError, one_line
-from ..report.entries import read_entry, write_entry
+from ..rows.entries import read_entry, write_entry
 from ._frames import FrameCache, FrameStore
 from ._scene import RolloutScene
 from ._served_outcomes import ServedOutcomes

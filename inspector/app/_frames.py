@@ -33,9 +33,9 @@ import numpy.typing as npt
 
 from ..analysis.timeline import RolloutTimeline
 from ..analysis.video_metrics import compare_clips, resizes_whole_frame
-from ..cache import DEFAULT_FRAME_CACHE_MB
 from ..data.video import fit_size
 from ..errors import InspectorError
+from . import DEFAULT_FRAME_CACHE_MB
 from ._listeners import Listeners, Notifying
 from ._overlay import ArmOverlay
 

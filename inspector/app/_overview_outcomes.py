@@ -11,7 +11,8 @@ from typing import Any
 
 from ..errors import InspectorError
 from ..outcomes import outcomes_path, read_outcomes
-from ..report.outcomes import percent_interval, rate_record
+from ..report.outcomes import percent_interval
+from ..rows.outcomes import rate_record
 from ._overview_rows import OverviewRow
 
 

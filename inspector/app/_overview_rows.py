@@ -1,6 +1,6 @@
 """The overview's rows: one summary row per served rollout, computed once and shared by every tab.
 
-Rows come from the report machinery (:mod:`inspector.report.tasks`), as ``report`` computes them:
+Rows come from the report machinery (:mod:`inspector.rows.tasks`), as ``report`` computes them:
 the same tasks (rollouts sharing a GT episode together, two tasks per worker), the same worker
 function and the same on-disk metrics cache, in a pool of spawned worker processes (never under
 the server's GIL), so tabs load and scrub smoothly while rows are computed. A worker takes the
@@ -31,10 +31,10 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from ..cache import warn_once
 from ..data.session import GT_DIR, ROLLOUTS_DIR, VIDEO_DIR, is_session
 from ..jobs.pool import default_jobs, init_background_worker, spawn_pool, stop_pool, worker_count
-from ..report.tasks import Outcome, Task, plan_tasks, run_task, warm_up
+from ..progress import warn_once
+from ..rows.tasks import Outcome, Task, plan_tasks, run_task, warm_up
 from ..units import DEFAULT_LIMIT_MARGIN_DEG
 from ._listeners import Listeners, Notifying
 
@@ -54,7 +54,7 @@ class OverviewRow:
         session: its session's name in the picker.
         tag, kind, prompt: as the rollout says (kind ``unreadable`` when it failed to load).
         session_root: the session directory (for its annotations).
-        summary: its report row (:func:`inspector.report.rows.rollout_summary`), None until
+        summary: its report row (:func:`inspector.rows.rollout.rollout_summary`), None until
             computed or when it failed.
         error: why it has no row (one line), or None.
         cached: the row came from the metrics cache.

@@ -22,8 +22,8 @@ from ..outcomes import sim_record
 from ..report.compare import compare_reports
 from ..report.figures import report_figures
 from ..report.html import KIND_LABELS, figure_html
-from ..report.rows import limit_steps
 from ..report.significance import verdict_parts
+from ..rows.rollout import limit_steps
 from ._overview_rows import OverviewRow
 
 SCOPE = "inspector-overview"  # the class of the overview's elements; its styles apply under it

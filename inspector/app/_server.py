@@ -14,12 +14,13 @@ from pathlib import Path
 
 from .._signals import note_stop_request, stop_requested
 from ..analysis.measure_settings import DEFAULT_MEASURES, MeasureSettings
-from ..cache import DEFAULT_FRAME_CACHE_MB, MetricsCache
+from ..cache import MetricsCache
 from ..data.session import is_session
 from ..data.sources import BUNDLED_DEMO, Sources, open_sources
 from ..errors import InspectorError
 from ..jobs.pool import stop_pool
 from ..robot.kinematics import kinematics
+from . import DEFAULT_FRAME_CACHE_MB
 from ._ab_mode import ABTab, served_sessions
 from ._catalog import Catalog
 from ._frames import FrameCache

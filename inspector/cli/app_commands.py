@@ -7,7 +7,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from ..cache import DEFAULT_FRAME_CACHE_MB
+from ..app import DEFAULT_FRAME_CACHE_MB
 from ..errors import InspectorError
 from . import flags as flag
 from .options import (

@@ -19,12 +19,12 @@ from pathlib import Path
 from typing import Any, cast
 
 from ..analysis.measure_settings import DEFAULT_MEASURES, MeasureSettings
-from ..cache import MetricsCache, take_unsaid, warn_once
+from ..cache import MetricsCache
 from ..data.session import load_session_rollout, read_session_with_gt
 from ..errors import InspectorError
 from ..jobs.pool import init_worker, interruptible, local_pool
 from ..jobs.ray import ray_workers
-from ..progress import progress_bar
+from ..progress import progress_bar, take_unsaid, warn_once
 from .files import format_size
 
 # Recordings a worker process writes, on average, before fresh processes take over: rerun's SDK

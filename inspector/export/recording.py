@@ -37,9 +37,9 @@ from ..analysis.timeline import RolloutTimeline, build_timeline
 from ..cache import rollout_key
 from ..data.session import ROLLOUT_FILE
 from ..errors import InspectorError
-from ..report.entries import read_entry, write_entry
 from ..robot.description import VIEW_DIRECTION, bounding_sphere
 from ..robot.kinematics import kinematics
+from ..rows.entries import read_entry, write_entry
 from . import layout as L
 from .arms import log_arms, prepare_meshes
 from .cameras import log_camera, recording_cameras

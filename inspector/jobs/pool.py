@@ -245,7 +245,7 @@ def _exit_with_parent() -> None:
 def init_worker() -> None:
     """One thread per worker process: the pool already keeps every core busy. A cache warning is
     handed back with the job's result, so that the command says it once, not once per worker."""
-    from ..cache import hold_warnings
+    from ..progress import hold_warnings
 
     hold_warnings()
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):

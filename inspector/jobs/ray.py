@@ -1,7 +1,7 @@
 """``--ray``: jobs as Ray tasks, on a local Ray instance or on an existing cluster.
 
 :meth:`RayWorkers.imap` runs any picklable function over jobs; the report and the export hand it
-the very jobs their local paths run (:func:`inspector.report.tasks.run_tasks_on_ray`,
+the very jobs their local paths run (:func:`inspector.rows.tasks.run_tasks_on_ray`,
 :func:`inspector.export.jobs.export_on_ray`), so results are the same by construction; Ray only
 decides where they run. Jobs name rollouts by
 path and carry no data: every worker reads them from disk, so sessions and their GT datasets must

@@ -1,5 +1,5 @@
-"""``inspector report``, ``compare``, ``rank`` and ``agreement``: tasks for workers (``tasks``), one
-row per rollout (``rows``), the report as tables or JSON (``build``), the HTML page (``html`` and
+"""``inspector report``, ``compare``, ``rank`` and ``agreement``: text, HTML and decisions over the
+rows of :mod:`inspector.rows`: the report as tables or JSON (``build``), the HTML page (``html`` and
 its figures), two evaluations side by side (``compare``), and the decisions between checkpoints
 (``ranking``, ``agreement``).
 
@@ -23,15 +23,6 @@ __getattr__, __dir__, __all__ = attach(__name__, {
     "render_report_html": ".html",
     "write_report_html": ".html",
     "report_figures": ".figures",
-    "rollout_summary": ".rows",
-    "episode_summary": ".rows",
-    "aggregate": ".rows",
-    "Task": ".tasks",
-    "EpisodeTask": ".tasks",
-    "Outcome": ".tasks",
-    "plan_tasks": ".tasks",
-    "run_task": ".tasks",
-    "run_tasks": ".tasks",
 })
 
 if TYPE_CHECKING:
@@ -44,12 +35,3 @@ if TYPE_CHECKING:
     from .figures import report_figures as report_figures
     from .html import render_report_html as render_report_html
     from .html import write_report_html as write_report_html
-    from .rows import aggregate as aggregate
-    from .rows import episode_summary as episode_summary
-    from .rows import rollout_summary as rollout_summary
-    from .tasks import EpisodeTask as EpisodeTask
-    from .tasks import Outcome as Outcome
-    from .tasks import Task as Task
-    from .tasks import plan_tasks as plan_tasks
-    from .tasks import run_task as run_task
-    from .tasks import run_tasks as run_tasks

@@ -1,7 +1,7 @@
 """``inspector report``: drift metrics per rollout and over the set, as tables or JSON.
 
 The work streams: rollouts are read by worker processes (``--jobs``, default one per core) a task
-at a time (:mod:`inspector.report.tasks`) and only their summary rows come back, so memory
+at a time (:mod:`inspector.rows.tasks`) and only their summary rows come back, so memory
 follows a task, not the evaluation. Rows are kept in the metrics cache (:mod:`inspector.cache`):
 a second report on unchanged rollouts reads them instead of decoding videos again.
 """
@@ -17,7 +17,6 @@ import numpy as np
 from ..analysis.latents import latents_summary
 from ..analysis.measure_settings import DEFAULT_MEASURES, MeasureSettings
 from ..analysis.video_action import median_lag_label
-from ..cache import warn_once
 from ..data.episodes import episode_tag
 from ..data.lerobot_dataset import dataset_name
 from ..data.session import CHAINED_KINDS
@@ -25,12 +24,14 @@ from ..data.sources import open_sources
 from ..errors import InspectorError
 from ..jobs.pool import default_jobs, worker_count
 from ..jobs.ray import ray_workers
+from ..progress import warn_once
+from ..rows.outcomes import attach_outcomes
+from ..rows.rollout import aggregate, limit_margin, limit_steps, prompt_divergence_record, prompt_pairs
+from ..rows.tasks import EpisodeTask, Task, plan_episode_tasks, plan_tasks, run_tasks, run_tasks_on_ray
 from ..units import DEFAULT_LIMIT_MARGIN_DEG, JOINT_NAMES
-from .outcomes import attach_outcomes, outcome_lines, success_lines
+from .outcomes import outcome_lines, success_lines
 from .repository_figures import attach_source_facts, repository_lines
-from .rows import aggregate, limit_margin, limit_steps, prompt_divergence_record, prompt_pairs
 from .sanity_text import sanity_lines
-from .tasks import EpisodeTask, Task, plan_episode_tasks, plan_tasks, run_tasks, run_tasks_on_ray
 from .trajectories import TRAJECTORY_LAYOUT, trajectory_table
 
 # Row fields a report sets on each row after the metrics cache (a cached row lacks them): outcomes

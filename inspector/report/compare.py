@@ -26,9 +26,9 @@ import numpy as np
 
 from ..data.session import SESSION_FILE, is_rollout, is_session, read_json
 from ..errors import InspectorError
+from ..rows.rollout import nearest_tag as _nearest_tag
 from ..stats import TIE_TOLERANCE, signed_rank_test
 from .build import build_report
-from .rows import nearest_tag as _nearest_tag
 from .significance import metric_tests, verdict_lines
 
 Row = dict[str, Any]

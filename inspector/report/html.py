@@ -30,12 +30,12 @@ from urllib.parse import quote
 from .._files import mkstemp_sibling
 from ..analysis.video_action import median_lag_label
 from ..errors import InspectorError
+from ..rows.rollout import limit_margin, limit_steps
 from ..units import JOINT_NAMES
 from .episode_figures import episode_figures, episode_key, episode_summary_numbers
 from .figures import Figure, report_figures
 from .html_outcomes import outcome_columns, success_section
 from .overlay_frames import overlay_section
-from .rows import limit_margin, limit_steps
 from .sanity_html import sanity_section
 from .svg import legend_html
 

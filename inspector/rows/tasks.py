@@ -25,7 +25,7 @@ from ..analysis.measures_switch import sanity_measures_on
 from ..analysis.timeline import batch_key, build_timeline, build_timelines
 from ..analysis.video_break import clip_quality
 from ..analysis.video_metrics import VideoMetrics, compare_clips, resizes_whole_frame
-from ..cache import MetricsCache, rollout_key, take_unsaid
+from ..cache import MetricsCache, rollout_key
 from ..data.episodes import episode_rollout, episode_tag
 from ..data.ground_truth import resolve_ground_truth
 from ..data.importers import NeuralTrajectories, open_trajectories
@@ -34,8 +34,9 @@ from ..data.session import CHAINED_KINDS, load_session_rollout, read_session_wit
 from ..errors import InspectorError
 from ..jobs.pool import init_worker, interruptible, local_pool
 from ..jobs.ray import RayWorkers
+from ..progress import take_unsaid
 from .entries import read_entry, write_entry
-from .rows import episode_summary, rollout_summary
+from .rollout import episode_summary, rollout_summary
 from .trajectories import trajectory_summary
 
 # Rollouts per task at most: a task's rollouts are compared against their GT in one pass, one

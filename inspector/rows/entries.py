@@ -15,7 +15,7 @@ from ..analysis.video_break import QUALITY_MEASURES
 from ..analysis.video_metrics import VideoMetrics, VideoMetricsRecord
 from ..cache import MetricsCache
 from ..units import JOINT_NAMES
-from .rows import RolloutRow
+from .rollout import RolloutRow
 
 
 class MetricsEntry(TypedDict):
