@@ -31,7 +31,7 @@ from .masked_psnr import MaskedPsnr, MaskedPsnrAccumulator, not_measured
 from .timeline import RolloutTimeline
 
 Frame = npt.NDArray[np.uint8]
-# Arm-masked PSNR is taken on every this-many-th frame (its mean moves by < 0.2 dB on the demo; each
+# Arm-masked PSNR is taken on every this-many-th frame (its mean moves by < 0.1 dB on the demo; each
 # frame costs a silhouette where no other rollout of the GT episode drew it, and a split error sum)
 MASKED_EVERY = 8
 TRACKED_POINT = "gripper_link"  # the gripper's body: the tip between open jaws lies over the table, no gripper in its patch

@@ -1,6 +1,7 @@
 """PSNR inside and outside the projected GT arm: is the imagined video's error in the arm or the scene?
 
-Each imagined frame is compared with its GT frame (resized to the imagined size, as for the
+Each imagined frame measured (every 8th: :data:`inspector.analysis.camera_measures.MASKED_EVERY`)
+is compared with its GT frame (resized to the imagined size, as for the
 whole-frame PSNR) twice: over the pixels the GT arm covers in the GT frame (the mask of
 :func:`inspector.robot.silhouette.arm_masks` for the GT joints at that step, drawn at the
 imagined frame's size), and over the rest. Each is a PSNR of its own pixels (peak 255, all three

@@ -319,7 +319,7 @@ _FOLLOW_CLIP_CLOCK = (
 
 # The frames take at most this share of the window's height, all rows together [vh]: at 900 px
 # the drift plot under them stays in view (two views' frames took 540 px, leaving ~200 px of plot).
-FRAMES_SHARE_VH = 42
+FRAMES_SHARE_VH = 39
 FRAME_ROW_CHROME_PX = 30  # a row's view name, caption and gap
 
 
