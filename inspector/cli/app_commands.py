@@ -13,10 +13,10 @@ from . import flags as flag
 from .options import (
     EXIT_BAD_INPUT,
     MAX_CACHE_MB,
-    MAX_JOBS,
     calibration_argument,
     check_listenable,
     dataset_argument,
+    jobs_argument,
     limit_margin_argument,
     measure_arguments,
     measures,
@@ -119,8 +119,7 @@ def add_export(sub: Any) -> None:
                    help="a LeRobot dataset's episode to export (repeat for several)")
     p.add_argument("--views", nargs="*", help="camera views to include (default: all)")
     dataset_argument(p)
-    p.add_argument("--jobs", "-j", type=flag.whole(1, MAX_JOBS), default=None,
-                   help="worker processes writing several recordings (default: one per core)")
+    jobs_argument(p, "worker processes writing several recordings")
     no_cache_argument(p)
     ray_argument(p, "write the recordings")
     limit_margin_argument(p)

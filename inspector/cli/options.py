@@ -69,6 +69,11 @@ def dataset_argument(p: argparse.ArgumentParser, help: str = GT_DATASET_HELP) ->
     p.add_argument("--dataset", help=help)
 
 
+def jobs_argument(p: argparse.ArgumentParser, what: str = "worker processes") -> None:
+    """``--jobs``/``-j``: how many worker processes (default one per core), within its range."""
+    p.add_argument("--jobs", "-j", type=flag.whole(1, MAX_JOBS), default=None, help=f"{what} (default: one per core)")
+
+
 def no_cache_argument(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the metrics cache")
 

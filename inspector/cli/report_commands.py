@@ -9,11 +9,11 @@ from typing import Any
 from ..schema import json_text
 from . import flags as flag
 from .options import (
-    MAX_JOBS,
     calibration_argument,
     dataset_argument,
     decision_arguments,
     emit,
+    jobs_argument,
     limit_margin_argument,
     measure_arguments,
     measures,
@@ -90,9 +90,8 @@ def add_report(sub: Any) -> None:
                                              "datasets (a directory or org/name in the local cache)")
     p.add_argument("--json", action="store_true")
     dataset_argument(p)
-    p.add_argument("--jobs", "-j", type=flag.whole(1, MAX_JOBS), default=None,
-                   help="worker processes (default: one per core; 1 computes in this process); with "
-                        "--ray, the local Ray instance's CPUs or a cluster's tasks at once")
+    jobs_argument(p, "worker processes (1 computes in this process; with --ray, the local Ray instance's CPUs "
+                     "or a cluster's tasks at once)")
     p.add_argument("--no-cache", action="store_true",
                    help="neither read nor write the metrics cache ($INSPECTOR_CACHE_DIR, else ~/.cache/inspector)")
     p.add_argument("--html", metavar="OUT.html",
@@ -119,8 +118,7 @@ def add_compare(sub: Any) -> None:
     p.add_argument("b", help="the same for B; deltas are B - A")
     p.add_argument("--json", action="store_true")
     dataset_argument(p)
-    p.add_argument("--jobs", "-j", type=flag.whole(1, MAX_JOBS), default=None,
-                   help="worker processes (default: one per core; 1 computes in this process)")
+    jobs_argument(p, "worker processes (1 computes in this process)")
     no_cache_argument(p)
     limit_margin_argument(p)
     outcome_source_argument(p)

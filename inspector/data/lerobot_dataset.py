@@ -199,11 +199,7 @@ class LeRobotDataset(LeRobotMetadata):
     """
 
     def __init__(self, root: str | Path, unnamed_joints_in_so101_order: bool = False) -> None:
-        """Args:
-            unnamed_joints_in_so101_order: take a 6-value ``observation.state`` / ``action`` whose
-                ``names`` is null (as ``lerobot-eval --eval.recording`` writes them) in
-                :data:`JOINT_NAMES` order, instead of refusing it; :attr:`unnamed_joints` lists them.
-        """
+        """As :class:`~.lerobot_meta.LeRobotMetadata`, with the caches episode reading needs."""
         super().__init__(root, unnamed_joints_in_so101_order)
         # Episodes' joints, most recently used last: many rollouts of one episode read it once.
         self._episode_cache: OrderedDict[tuple, Episode] = OrderedDict()
