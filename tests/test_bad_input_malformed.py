@@ -1,6 +1,6 @@
 """Malformed input, made from valid inputs by mutation, for ``import``, ``info``, ``report``,
 ``export`` and the app's catalog (the property tests of the readers are in
-``test_malformed_properties.py``). The valid inputs are the repository's own: a DreamZero-SO101
+``test_bad_input_properties.py``). The valid inputs are the repository's own: a DreamZero-SO101
 source directory made from the bundled demo (``dreamzero_layout.py``), the sessions imported from
 it, and the LeRobot-written datasets of ``tests/data/lerobot``.
 

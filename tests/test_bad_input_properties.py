@@ -1,6 +1,6 @@
 """Property tests (hypothesis) of the readers: the session reader and the DreamZero-SO101 importer
 take anything and answer with a session (or a report row) or one ``InspectorError``, never a crash,
-and leave nothing half-written. The hand-made malformed cases are in ``test_malformed.py``.
+and leave nothing half-written. The hand-made malformed cases are in ``test_bad_input_malformed.py``.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-from test_malformed import DEEP_JSON, HUGE_INT_JSON, npy_bytes
+from test_bad_input_malformed import DEEP_JSON, HUGE_INT_JSON, npy_bytes
 
 from inspector.data.session import SCHEMA, open_session
 from inspector.errors import InspectorError
