@@ -147,7 +147,7 @@ def build_report(paths: Sequence[str], dataset: str | None = None, jobs: int | N
         if episodes:
             report["episodes"] = episodes
         warnings = ([f"{r['tag']}: {r['gt_warning']}" for r in ordered if r.get("gt_warning")] + outcome_warnings
-                    + source_notes)
+                    + source_notes + _camera_warnings(sources))
         if warnings:
             report["warnings"] = warnings
         if errors:
@@ -329,3 +329,17 @@ def _worst_joint(per_joint_rmse: list[float] | None) -> str:
         return "-"
     k = int(np.argmax(per_joint_rmse))
     return f"{JOINT_NAMES[k]} {per_joint_rmse[k]:.2f}"
+
+
+def _camera_warnings(sources: Any) -> list[str]:
+    """A session's ``cameras.json`` that cannot be read, said once (its rows carry the same note
+    on each view's camera measures, left unmeasured; the rest of the report goes on)."""
+    from ..data.cameras import session_cameras
+
+    out = []
+    for session in sources.sessions:
+        try:
+            session_cameras(session)
+        except InspectorError as exc:
+            out.append(f"cameras not read, the arms-in-frames measures left out: {exc}")
+    return out
