@@ -64,7 +64,11 @@ def read_cameras(path: Path) -> dict[str, Camera]:
     Raises:
         InspectorError: not a regular file, too large, not JSON, or a field out of place.
     """
-    if not path.exists() and not path.is_symlink():
+    try:
+        present = path.exists() or path.is_symlink()
+    except OSError:  # a raw directory's sidecar name past the file system's limit: no such file can be
+        return {}
+    if not present:
         return {}
     data = read_json_object(path)
     return parse_cameras(path, data)
