@@ -28,7 +28,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -60,7 +60,7 @@ def measure(tree: Path, work: Path, *argv: object, timeout: float = 1800) -> tup
     return int(rc), int(peak_kib) / 1024, wall, (lines[-1][:160] if lines else "")
 
 
-def _session(root: Path, name: str, tags: list[str], **rollout: object) -> Path:
+def _session(root: Path, name: str = "s", tags: Sequence[str] = ("r0",), **rollout: object) -> Path:
     from inspector.data.session import SessionWriter
 
     with SessionWriter.create(root / name, model={"name": name}) as w:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import sys
 import tracemalloc
 from pathlib import Path
 
@@ -22,29 +23,11 @@ from inspector.data.session import MAX_VIDEO_ONLY_STEPS, ROLLOUT_FILE, ROLLOUTS_
 from inspector.outcomes import import_outcomes
 from inspector.outcomes._import_file import MAX_UNMATCHED_LISTED
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from hostile_memory import _session, _write_votes  # noqa: E402  (the benchmark's inputs, built once)
+
 # After the changes these commands peak at 120-440 MiB; before, at 1.3-3.9 GB.
 PEAK_RSS_MIB = 700
-
-
-def _session(root: Path, name: str = "s", tags: tuple[str, ...] = ("r0",)) -> Path:
-    with SessionWriter.create(root / name, model={"name": name}) as w:
-        for tag in tags:
-            w.add_rollout(tag, kind="single_chunk", actions=np.zeros((1, 9, 6)))
-    return (root / name).resolve()
-
-
-def _write_votes(roots: list[Path], pairs: list[tuple[int, int, str]]) -> None:
-    """Each vote in both of its sessions' votes.json, as the app writes them."""
-    per_session: dict[int, list[dict]] = {i: [] for i in range(len(roots))}
-    for k, (a, b, answer) in enumerate(pairs):
-        vote = {"id": f"{k:032x}", "time": "2026-11-28T12:00:00+00:00", "answer": answer,
-                "a": {"session": str(roots[a]), "name": roots[a].name, "rollout": "r0", "progress": None},
-                "b": {"session": str(roots[b]), "name": roots[b].name, "rollout": "r0", "progress": None},
-                "note": ""}
-        per_session[a].append(vote)
-        per_session[b].append(vote)
-    for i, votes in per_session.items():
-        (roots[i] / "votes.json").write_text(json.dumps({"schema": "inspector.votes/1", "votes": votes}))
 
 
 # ----------------------------------------------------------------------------------------------
