@@ -367,3 +367,59 @@ def test_the_projected_gt_arm_covers_the_arm_in_the_gt_frames(scene, demo_camera
                     assert iou >= 0.8, (episode, view, int(steps[k]), iou)
     finally:
         renderer.close()
+
+
+@pytest.mark.slow
+def test_the_tracked_point_is_the_surface_the_camera_sees_at_the_start(scene, demo_cameras):
+    """The gripper track follows the arm's surface under the projected ``gripper_link`` origin:
+    that point projects to the same pixel, lies in front of the origin, and at MuJoCo's own depth
+    for the pixel (within the coarse meshes' error)."""
+    import mujoco
+
+    from inspector.analysis.camera_measures import TRACKED_POINT, gripper_surface, project_gripper, project_point
+
+    m = scene.model
+    renderer = mujoco.Renderer(m, 240, 320)
+    renderer.enable_depth_rendering()
+    data = mujoco.MjData(m)
+    qpos = np.array([m.joint(j).qposadr[0] for j in ("shoulder_pan", "shoulder_lift", "elbow_flex",
+                                                     "wrist_flex", "wrist_roll", "gripper")])
+    ep = open_dataset(DEMO / "dataset").episode(0)
+    cam = demo_cameras["front"]
+    try:
+        for step in np.linspace(0, ep.length - 1, 5).astype(int):
+            q = to_radians(ep.state[step], Units("degrees"))
+            link, offset = gripper_surface(cam, q)
+            start = project_gripper(cam, q[None])[0]
+            assert np.allclose(project_point(cam, q[None], (link, offset))[0], start, atol=1e-6)
+            depth = _depth(cam, q, (link, offset))
+            assert depth < _depth(cam, q, (TRACKED_POINT, np.zeros(3)))  # on the outside of the body
+            data.qpos[qpos] = q
+            mujoco.mj_forward(m, data)
+            renderer.update_scene(data, "front")
+            seen = renderer.render()[int(round(start[1])), int(round(start[0]))]
+            assert abs(depth - seen) < 0.01, (int(step), link, depth, float(seen))
+    finally:
+        renderer.close()
+
+
+def _depth(cam: Camera, q: np.ndarray, point: tuple[str, np.ndarray]) -> float:
+    """Depth [m] along ``cam``'s optical axis of a point fixed on a link, the arm at ``q``."""
+    from inspector.robot.kinematics import kinematics
+
+    link, offset = point
+    T = kinematics().link_poses(q[None], links=(link,))[link][0]
+    return float(cam.project((T[:3, :3] @ offset + T[:3, 3])[None], cam.T_base_camera)[1][0])
+
+
+def test_a_ray_that_misses_the_arm_finds_no_surface(demo_cameras):
+    from inspector.robot.silhouette import surface_point
+
+    cam = demo_cameras["front"]
+    q = np.zeros(6)
+    mask = arm_masks(arm_mesh(), cam, q[None])[0]
+    assert not mask[0, 0]  # the image's corner shows no arm
+    assert surface_point(arm_mesh(), cam, q, (0.0, 0.0)) is None
+    v, u = np.argwhere(mask)[len(np.argwhere(mask)) // 2]
+    hit = surface_point(arm_mesh(), cam, q, (float(u), float(v)))
+    assert hit is not None and hit[0] in {mesh.link for mesh in arm_mesh().links}

@@ -50,7 +50,7 @@ def test_normalised_cross_correlation_is_the_pearson_correlation_of_each_patch()
     rng = np.random.default_rng(1)
     window = (rng.random((30, 34, 3)) * 255).astype(np.float32)
     template = window[9:18, 12:21].copy()
-    scores = _ncc(window, template)
+    scores = _ncc(window.transpose(2, 0, 1), template.transpose(2, 0, 1))  # channels first
     for i, j in [(0, 0), (9, 12), (21, 25), (4, 17)]:
         patch = window[i:i + 9, j:j + 9].ravel()
         assert scores[i, j] == pytest.approx(np.corrcoef(patch, template.ravel())[0, 1], abs=1e-5)

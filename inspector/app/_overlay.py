@@ -25,7 +25,14 @@ from collections.abc import Callable
 import numpy as np
 import numpy.typing as npt
 
-from ..analysis.camera_measures import TRACKED_POINT, cameras_of, project_gripper, scaled_camera
+from ..analysis.camera_measures import (
+    TRACKED_POINT,
+    SurfacePoint,
+    cameras_of,
+    gripper_surface,
+    project_point,
+    scaled_camera,
+)
 from ..analysis.gripper_track import GripperTracker
 from ..analysis.timeline import RolloutTimeline
 from ..robot.camera import Camera
@@ -93,6 +100,7 @@ class ArmOverlay:
         self._gt_q = to_radians(tl.gt_aligned, tl.units) if tl.gt_aligned is not None else None
         self._trackers: dict[str, GripperTracker] = {}
         self._track_size: dict[str, tuple[int, int]] = {}
+        self._points: dict[str, SurfacePoint] = {}
 
     @classmethod
     def of(cls, tl: RolloutTimeline) -> ArmOverlay | None:
@@ -116,11 +124,19 @@ class ArmOverlay:
             tracker = self._trackers.get(view)
             if tracker is None or f == 0:
                 size = (rgb.shape[1], rgb.shape[0])
-                start = project_gripper(scaled_camera(camera, size), gt_q[:1])[0]
+                start = project_point(scaled_camera(camera, size), gt_q[:1], self._point(view))[0]
                 tracker = self._trackers[view] = GripperTracker(start, size)
                 self._track_size[view] = size
             tracker.add(rgb)
         return feed
+
+    def _point(self, view: str) -> SurfacePoint:
+        """The point on the arm the gripper's track follows in ``view`` (as the report's)."""
+        point = self._points.get(view)
+        if point is None:
+            point = (TRACKED_POINT, np.zeros(3)) if self._gt_q is None else gripper_surface(self.cameras[view], self._gt_q[0])
+            self._points[view] = point
+        return point
 
     def track(self, view: str) -> tuple[npt.NDArray[np.float64], tuple[int, int]] | None:
         """(F, 2) the tracked gripper of ``view`` so far [px, at the decoded size] and that size."""
@@ -135,7 +151,7 @@ class ArmOverlay:
             return None
         tracked, size = known
         tl = self.tl
-        projected = project_gripper(scaled_camera(self.cameras[view], size), self._pred_q)
+        projected = project_point(scaled_camera(self.cameras[view], size), self._pred_q, self._point(view))
         frame_of = np.array([tl.frame_index(s) for s in range(tl.n_steps)])
         out = np.full(tl.n_steps, np.nan)
         ok = frame_of < len(tracked)
@@ -180,7 +196,7 @@ class ArmOverlay:
         over_gt = _png_data_uri(rgba)
         radius = max(3.0, size[1] / 40)
         if self._pred_q is not None and camera.is_fixed:
-            _ring(rgba, project_gripper(cam, self._pred_q[step:step + 1])[0], PRED_RGB, radius)
+            _ring(rgba, project_point(cam, self._pred_q[step:step + 1], self._point(view))[0], PRED_RGB, radius)
         known = self.track(view)
         if known is not None and frame < len(known[0]):
             tracked, track_size = known

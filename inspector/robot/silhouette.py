@@ -21,6 +21,7 @@ Usage::
     masks = arm_masks(mesh, camera, q_rad)        # (T, H, W) bool
     edges = outline(masks[0])                      # (H, W) bool, the silhouette's border
     uv = skeleton(camera, q_rad)                   # (T, len(SKELETON), 2) [px]
+    link, p = surface_point(mesh, camera, q_rad[0], uv_start)   # the surface seen at a pixel
 """
 
 from __future__ import annotations
@@ -196,6 +197,47 @@ def _facing(tri: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     return tri[area <= 0]
 
 
+def surface_point(mesh: ArmMesh, camera: Camera, q_rad: npt.ArrayLike, uv: Sequence[float]
+                  ) -> tuple[str, npt.NDArray[np.float64]] | None:
+    """The arm's surface the camera sees at pixel ``uv`` with the arm at ``q_rad`` (6,): the
+    link hit first by the ray through that pixel and the hit point in the link's frame [m]
+    (None: the ray misses the arm). A point fixed on the surface stays the one a tracker
+    following that pixel's patch sees, where a point inside the body drifts off it as the
+    link turns."""
+    q = np.asarray(q_rad, np.float64).reshape(1, -1)
+    links = tuple(m.link for m in mesh.links)
+    wanted = links + ((camera.parent,) if camera.parent is not None and camera.parent not in links else ())
+    poses = kinematics().link_poses(q, links=wanted)
+    T_camera_base = _inverse(camera.poses(poses, 1)[0])
+    ray = np.linalg.solve(camera.K, np.array([uv[0], uv[1], 1.0]))
+    best: tuple[float, str, npt.NDArray[np.float64]] | None = None
+    for m in mesh.links:
+        T = T_camera_base @ poses[m.link][0]
+        tri = (m.vertices @ T[:3, :3].T + T[:3, 3])[m.faces]
+        hit = _ray_hits(ray, tri)
+        if hit is not None and (best is None or hit < best[0]):
+            p_camera = hit * ray
+            best = (hit, m.link, T[:3, :3].T @ (p_camera - T[:3, 3]))
+    return None if best is None else (best[1], best[2])
+
+
+def _ray_hits(ray: npt.NDArray[np.float64], tri: npt.NDArray[np.float64]) -> float | None:
+    """The nearest positive distance along ``ray`` (from the origin, in units of ``ray``) at which
+    it crosses one of the (M, 3, 3) triangles (Moller-Trumbore), or None."""
+    a, e1, e2 = tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    p = np.cross(ray, e2)
+    det = (e1 * p).sum(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / det
+        s = -a
+        bu = (s * p).sum(axis=1) * inv
+        qv = np.cross(s, e1)
+        bv = (qv @ ray) * inv
+        t = (e2 * qv).sum(axis=1) * inv
+    ok = (np.abs(det) > 1e-12) & (bu >= 0) & (bv >= 0) & (bu + bv <= 1) & (t > 0)
+    return float(t[ok].min()) if ok.any() else None
+
+
 def skeleton(camera: Camera, q_rad: npt.ArrayLike, names: Sequence[str] = SKELETON) -> npt.NDArray[np.float64]:
     """(T, len(names), 2) pixels of the named points (NaN behind the camera): a light overlay."""
     q = np.asarray(q_rad, np.float64)
@@ -312,5 +354,5 @@ def _inverse_slope(p: npt.NDArray[np.float64], q: npt.NDArray[np.float64]) -> np
         return np.where(dy > 0, (q[:, 0] - p[:, 0]) / dy, 0.0)
 
 
-__all__ = ["ArmMesh", "LinkMesh", "SKELETON", "arm_masks", "arm_mesh", "arm_triangles", "outline", "rasterise",
+__all__ = ["ArmMesh", "LinkMesh", "SKELETON", "arm_masks", "arm_mesh", "arm_triangles", "outline", "rasterise", "surface_point",
            "skeleton"]
