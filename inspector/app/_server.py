@@ -15,6 +15,7 @@ from pathlib import Path
 from .._signals import note_stop_request, stop_requested
 from ..analysis.measure_settings import DEFAULT_MEASURES, MeasureSettings
 from ..cache import MetricsCache
+from ..data.cameras import cameras_path
 from ..data.session import is_session
 from ..data.sources import BUNDLED_DEMO, Sources, open_sources
 from ..errors import InspectorError
@@ -76,7 +77,9 @@ class InspectorApp:
         # Meshes and the FK chain take ~1 s to load: start now, wait only where they are needed.
         loader = ThreadPoolExecutor(1, thread_name_prefix="inspector-robot")
         self._robot: Future[SharedRobot] = loader.submit(_load_robot)
-        loader.shutdown(wait=False)  # the one job still runs; the thread exits after it
+        if any(cameras_path(session).is_file() for session in sources.sessions):
+            loader.submit(_warm_overlay)  # the first rollout with a camera opens without waiting on them
+        loader.shutdown(wait=False)  # the jobs still run; the thread exits after them
         self.frame_cache = FrameCache(int(cache_mb * 2**20))
         self.joint_links = joint_child_links()
         self.catalog = Catalog(sources, self._decoder, self.joint_links, self.frame_cache,
@@ -176,6 +179,15 @@ def _load_robot() -> SharedRobot:
     in a process (a notebook's, a test run's) share them; every use of its URDF takes its lock."""
     kinematics()  # build the FK chain now rather than on the first rollout open
     return SharedRobot()
+
+
+def _warm_overlay() -> None:
+    """What drawing the arms into the frames and tracking the gripper load once a process (the
+    coarse meshes, ~0.5 s; the FFTs' module, ~0.4 s), ready before a rollout needs them."""
+    from ..analysis import gripper_track  # noqa: F401  (scipy.fft, on the tracker's first frame otherwise)
+    from ..robot.silhouette import arm_mesh
+
+    arm_mesh()
 
 
 def serve(paths: Sequence[str | Path] | None = None, host: str = "127.0.0.1", port: int = 8080,
