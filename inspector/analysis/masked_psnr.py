@@ -1,6 +1,6 @@
 """PSNR inside and outside the projected GT arm: is the imagined video's error in the arm or the scene?
 
-Each imagined frame measured (about 32 a clip, evenly spread: :data:`inspector.analysis.camera_measures.MASKED_FRAMES`)
+Each imagined frame measured (32-63 a clip: :data:`inspector.analysis.camera_measures.MASKED_FRAMES`)
 is compared with its GT frame (resized to the imagined size, as for the
 whole-frame PSNR) twice: over the pixels the GT arm covers in the GT frame (the mask of
 :func:`inspector.robot.silhouette.arm_masks` for the GT joints at that step, drawn at the
