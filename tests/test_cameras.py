@@ -423,3 +423,29 @@ def test_a_ray_that_misses_the_arm_finds_no_surface(demo_cameras):
     v, u = np.argwhere(mask)[len(np.argwhere(mask)) // 2]
     hit = surface_point(arm_mesh(), cam, q, (float(u), float(v)))
     assert hit is not None and hit[0] in {mesh.link for mesh in arm_mesh().links}
+
+
+@pytest.mark.slow
+def test_a_raw_directory_s_cameras_reach_the_report_s_workers(dz_layout, tmp_path, demo_cameras):
+    """The sidecar of a raw directory (its import is a temporary session without it) is what
+    every worker of ``report --jobs 2`` reads: its view's camera measures are there, where a view
+    without a camera is null."""
+    import shutil
+    import subprocess
+    import sys
+
+    raw = tmp_path / "dreamzero_so101"
+    shutil.copytree(dz_layout, raw)
+    write_camera(sidecar_path(raw), "front", demo_cameras["front"])
+    env = {**os.environ, "INSPECTOR_CACHE_DIR": str(tmp_path / "cache")}
+    done = subprocess.run([sys.executable, "-m", "inspector", "report", str(raw), "--json", "--jobs", "2"],
+                          capture_output=True, text=True, env=env, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    rows = {r["tag"]: r for r in json.loads(done.stdout)["rollouts"]}
+    for tag in ("f000", "f076", "f153", "train_ep0"):  # single chunks with GT joints: measured
+        front = rows[tag]["gripper_px"]["front"]
+        assert front["frames_tracked"] == 9 and front["median"] < 3.0, (tag, front)
+        assert rows[tag]["video_psnr_masked"]["front"]["frames"] == 9
+        assert all(rows[tag]["gripper_px"][view] is None for view in rows[tag]["gripper_px"] if view != "front")
+    # the autoregressive rollout has no GT joints: its camera says so, never a null "no camera"
+    assert "no GT joints" in rows["ep000_train"]["gripper_px"]["front"]["note"]

@@ -63,3 +63,25 @@ def test_each_view_with_a_camera_is_a_pinhole_with_its_videos_under_it(tmp_path)
     q = to_radians(tl.pred, tl.units)
     expected = wrist.poses(kinematics().link_poses(q, links=(wrist.parent,)), len(q))[:, :3, 3]
     np.testing.assert_allclose(np.sort(np.array(moving).reshape(-1, 3), axis=0), np.sort(expected, axis=0), atol=1e-5)
+
+
+def test_a_raw_directory_s_cameras_reach_the_export_workers(dz_layout, tmp_path):
+    """``export --jobs 2`` of a raw directory: each worker reads its sidecar's cameras (the
+    temporary import holds none), so the view with a camera is a Pinhole in every recording."""
+    import shutil
+
+    from inspector.data.cameras import sidecar_path, write_camera
+
+    raw = tmp_path / "dreamzero_so101"
+    shutil.copytree(dz_layout, raw)
+    write_camera(sidecar_path(raw), "front", read_cameras(DEMO / CAMERAS_FILE)["front"])
+    out = tmp_path / "rrd"
+    done = subprocess.run([sys.executable, "-m", "inspector", "export", str(raw), "-o", str(out), "--jobs", "2",
+                           "--no-cache"], capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-2000:]
+    files = sorted(out.glob("*.rrd"))
+    assert len(files) >= 2
+    for path in files:
+        entities = {chunk.entity_path for chunk in rr.chunk.RrdReader(path).stream().to_chunks()}
+        assert f"/{camera_path('front')}" in entities, path.name
+        assert not any(e.startswith(f"/{camera_path('top')}") for e in entities)

@@ -59,6 +59,8 @@ class Task:
         cache_dir: the metrics cache directory (None: the default one).
         use_cache: read and write the metrics cache.
         measures: the sanity measures' tolerances.
+        cameras_file: where the session's cameras live when not in its directory (a raw
+            directory's sidecar), or None.
     """
 
     session_root: str
@@ -68,6 +70,7 @@ class Task:
     cache_dir: str | None = None
     use_cache: bool = True
     measures: MeasureSettings = DEFAULT_MEASURES
+    cameras_file: str | None = None
 
 
 @dataclass(frozen=True)
@@ -130,9 +133,10 @@ def plan_tasks(sessions: Sequence[Any], jobs: int, limit_margin_deg: float, cach
     by_root = {str(s.root): s for s in sessions}
     for (root, _), tags in groups.items():
         override = by_root[root].gt_source.get("dataset")
+        cameras = by_root[root].cameras_file
         for i in range(0, len(tags), per_task):
             tasks.append(Task(root, tuple(tags[i:i + per_task]), override, limit_margin_deg, cache_dir, use_cache,
-                              measures))
+                              measures, None if cameras is None else str(cameras)))
     return tasks
 
 
@@ -194,12 +198,12 @@ def found_in_cache(tasks: Sequence[Task | EpisodeTask], at_most: int) -> tuple[l
     single look-up that misses.
     """
     found: list[list[Outcome]] = []
-    sessions: dict[tuple[str, str | None], Any] = {}
+    sessions: dict[tuple[str, str | None, str | None], Any] = {}
     looked_up = 0
     for i, task in enumerate(tasks):
         if not isinstance(task, Task) or not task.use_cache or looked_up + len(task.tags) > at_most:
             return found, list(tasks[i:])
-        where = (task.session_root, task.dataset)
+        where = (task.session_root, task.dataset, task.cameras_file)
         if where not in sessions:
             try:
                 sessions[where] = read_session_with_gt(*where)
@@ -234,7 +238,7 @@ def run_task(task: Task | EpisodeTask) -> list[Outcome]:
         return _run_episode_task(task)
 
     try:
-        session = read_session_with_gt(task.session_root, task.dataset)
+        session = read_session_with_gt(task.session_root, task.dataset, task.cameras_file)
     except InspectorError as exc:
         return [Outcome(task.session_root, tag, error_file=exc.file, error=exc.what) for tag in task.tags]
     cache = MetricsCache(task.cache_dir, enabled=task.use_cache)
@@ -254,7 +258,7 @@ def cached_outcomes(task: Task) -> tuple[list[Outcome], tuple[str, ...]]:
     What lists a whole evaluation at once (the app's overview) before computing the rest.
     """
     try:
-        session = read_session_with_gt(task.session_root, task.dataset)
+        session = read_session_with_gt(task.session_root, task.dataset, task.cameras_file)
     except InspectorError as exc:
         return [Outcome(task.session_root, tag, error_file=exc.file, error=exc.what) for tag in task.tags], ()
     outcomes, todo = _look_up(task, session, MetricsCache(task.cache_dir, enabled=task.use_cache))
