@@ -65,16 +65,21 @@ def test_each_view_with_a_camera_is_a_pinhole_with_its_videos_under_it(tmp_path)
     np.testing.assert_allclose(np.sort(np.array(moving).reshape(-1, 3), axis=0), np.sort(expected, axis=0), atol=1e-5)
 
 
-def test_a_raw_directory_s_cameras_reach_the_export_workers(dz_layout, tmp_path):
-    """``export --jobs 2`` of a raw directory: each worker reads its sidecar's cameras (the
-    temporary import holds none), so the view with a camera is a Pinhole in every recording."""
+def test_a_raw_directory_s_sidecars_reach_the_export_workers(dz_layout, tmp_path):
+    """``export --jobs 2`` of a raw directory: each worker reads its sidecars (the temporary
+    import holds neither), so the view with a camera is a Pinhole in every recording, and a
+    rollout labelled in the outcomes sidecar carries its outcome."""
     import shutil
 
     from inspector.data.cameras import sidecar_path, write_camera
+    from inspector.export.outcomes import OUTCOME
+    from inspector.said.outcome_store import sidecar_path as outcomes_sidecar
+    from inspector.said.outcome_store import update_outcome
 
     raw = tmp_path / "dreamzero_so101"
     shutil.copytree(dz_layout, raw)
     write_camera(sidecar_path(raw), "front", read_cameras(DEMO / CAMERAS_FILE)["front"])
+    update_outcome(outcomes_sidecar(raw), "f000", {"success": True, "progress": 100})
     out = tmp_path / "rrd"
     done = subprocess.run([sys.executable, "-m", "inspector", "export", str(raw), "-o", str(out), "--jobs", "2",
                            "--no-cache"], capture_output=True, text=True, timeout=900)
@@ -85,3 +90,4 @@ def test_a_raw_directory_s_cameras_reach_the_export_workers(dz_layout, tmp_path)
         entities = {chunk.entity_path for chunk in rr.chunk.RrdReader(path).stream().to_chunks()}
         assert f"/{camera_path('front')}" in entities, path.name
         assert not any(e.startswith(f"/{camera_path('top')}") for e in entities)
+        assert (f"/{OUTCOME}" in entities) == (path.stem == "f000"), path.name

@@ -58,15 +58,18 @@ def open_session(root: str | Path, check: Callable[[Path], None] | None = None, 
     return session
 
 
-def read_session_with_gt(session_root: str | Path, dataset: str | None, cameras_file: str | None = None) -> Session:
+def read_session_with_gt(session_root: str | Path, dataset: str | None, cameras_file: str | None = None,
+                         outcomes_file: str | None = None) -> Session:
     """A session as a worker reads it (``session.json`` alone), its GT replaced by ``dataset``
-    (``--dataset``) when given, its cameras read from ``cameras_file`` when given (a raw
-    directory's sidecar: its temporary import holds none)."""
+    (``--dataset``) when given, its cameras and outcomes read from ``cameras_file`` and
+    ``outcomes_file`` when given (a raw directory's sidecars: its temporary import holds neither)."""
     session = read_session(Path(session_root))
     if dataset is not None:
         session.gt_source["dataset"] = dataset
     if cameras_file is not None:
         session.cameras_file = Path(cameras_file)
+    if outcomes_file is not None:
+        session.outcomes_file = Path(outcomes_file)
     return session
 
 

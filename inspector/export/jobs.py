@@ -47,8 +47,8 @@ class ExportJob:
         use_cache: read and write the metrics cache.
         outcome_source: the outcome source the recording shows (None: the precedence rule).
         measures: the sanity measures' tolerances.
-        cameras_file: where the session's cameras live when not in its directory (a raw
-            directory's sidecar), or None.
+        cameras_file, outcomes_file: where the session's cameras and outcomes live when not in
+            its directory (a raw directory's sidecars), or None.
     """
 
     session_root: str
@@ -61,6 +61,7 @@ class ExportJob:
     outcome_source: str | None = None
     measures: MeasureSettings = DEFAULT_MEASURES
     cameras_file: str | None = None
+    outcomes_file: str | None = None
 
 
 @dataclass(frozen=True)
@@ -87,7 +88,8 @@ def run_export_job(job: ExportJob) -> ExportOutcome:
     from .recording import export_rollout  # here: the driver writes no recording (see .files)
 
     try:
-        rollout = load_session_rollout(read_session_with_gt(job.session_root, job.dataset, job.cameras_file), job.tag)
+        session = read_session_with_gt(job.session_root, job.dataset, job.cameras_file, job.outcomes_file)
+        rollout = load_session_rollout(session, job.tag)
         dest = export_rollout(rollout, Path(job.dest), job.views, job.limit_margin_deg,
                               MetricsCache(enabled=job.use_cache), outcome_source=job.outcome_source, measures=job.measures)
     except InspectorError as exc:
@@ -178,8 +180,8 @@ class _OutcomePrinter:
             self.jobs.append(ExportJob(str(session.root), tag, os.path.abspath(dest),
                                        None if views is None else tuple(views),
                                        session.gt_source.get("dataset"), limit_margin_deg, use_cache,
-                                       outcome_source, measures,
-                                       None if session.cameras_file is None else str(session.cameras_file)))
+                                       outcome_source, measures, _path_or_none(session.cameras_file),
+                                       _path_or_none(session.outcomes_file)))
 
     def show(self, outcome: ExportOutcome) -> None:
         warn_once(outcome.cache_warning)
@@ -194,3 +196,7 @@ class _OutcomePrinter:
             self.bar.update(1)
         else:
             print(line, file=stream, flush=True)
+
+
+def _path_or_none(path: Path | None) -> str | None:
+    return None if path is None else str(path)
