@@ -6,10 +6,11 @@ following the gripper through the video itself and taking the pixel distance bet
 tracks, frame by frame (EWMBench's trajectory consistency compares 2D end-effector tracks the
 same way, by Hausdorff distance and DTW).
 
-The tracker is template matching by normalised cross-correlation (numpy only): a square patch
+The tracker is template matching by normalised cross-correlation (numpy, scipy.fft): a square patch
 around the point in one frame is looked for within a search window of the next, and the best
-match (refined to a sub-pixel peak) is the point's new place. It starts at the projected GT
-gripper tip in the first frame (the model's first frame is conditioned on the GT one). A match
+match (refined to a sub-pixel peak) is the point's new place. It starts where its caller puts it
+(the report and the app: the projected GT ``gripper_link`` origin in the first frame, the model's
+first frame being conditioned on the GT one). A match
 whose correlation falls under :data:`MIN_CONFIDENCE`, a patch without texture, a peak on the
 search window's rim (the point moved further than the window reaches) or a point leaving the
 image loses the track, for good: the distances stop there, and a lost track is never a small
