@@ -1,8 +1,9 @@
 """The imagined gripper tracked through its video, against where the predicted joints put it.
 
-A view with a camera knows where the predicted joints put the gripper in each imagined frame (the
-projected ``gripper_tip``). Whether the imagined video shows the gripper there is measured by
-following the gripper through the video itself and taking the pixel distance between the two
+A view with a camera knows where the predicted joints put the gripper in each imagined frame (a
+point on the arm's surface, projected: :func:`inspector.analysis.camera_measures.gripper_surface`).
+Whether the imagined video shows the gripper there is measured by following the gripper through
+the video itself and taking the pixel distance between the two
 tracks, frame by frame (EWMBench's trajectory consistency compares 2D end-effector tracks the
 same way, by Hausdorff distance and DTW).
 
@@ -10,9 +11,8 @@ The tracker is template matching by normalised cross-correlation (numpy, scipy.f
 around the point in one frame is looked for within a search window of the next, and the best
 match (refined to a sub-pixel peak) is the point's new place. It starts where its caller puts it
 (the report and the app: the projected GT ``gripper_link`` origin in the first frame, the model's
-first frame being conditioned on the GT one). A match
-whose correlation falls under :data:`MIN_CONFIDENCE`, a patch without texture, a peak on the
-search window's rim (the point moved further than the window reaches) or a point leaving the
+first frame being conditioned on the GT one). A match whose correlation falls under
+:data:`MIN_CONFIDENCE`, a patch without texture, a peak on the search window's rim (the point moved further than the window reaches) or a point leaving the
 image loses the track, for good: the distances stop there, and a lost track is never a small
 distance.
 
