@@ -3,9 +3,9 @@
 A view with a camera knows where the predicted joints put the gripper in each imagined frame (a
 point on the arm's surface, projected: :func:`inspector.analysis.camera_measures.gripper_surface`).
 Whether the imagined video shows the gripper there is measured by following the gripper through
-the video itself and taking the pixel distance between the two
-tracks, frame by frame (EWMBench's trajectory consistency compares 2D end-effector tracks the
-same way, by Hausdorff distance and DTW).
+the video itself and taking the pixel distance between the two tracks, frame by frame
+(EWMBench's trajectory consistency compares 2D end-effector tracks the same way, by Hausdorff
+distance and DTW).
 
 The tracker is template matching by normalised cross-correlation (numpy, scipy.fft): a square patch
 around the point in one frame is looked for within a search window of the next, and the best
