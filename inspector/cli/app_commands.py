@@ -13,16 +13,13 @@ from . import flags as flag
 from .options import (
     EXIT_BAD_INPUT,
     MAX_CACHE_MB,
-    calibration_argument,
     check_listenable,
     dataset_argument,
     jobs_argument,
-    limit_margin_argument,
-    measure_arguments,
     measures,
     no_cache_argument,
-    outcome_source_argument,
     ray_argument,
+    rollout_measure_arguments,
 )
 
 
@@ -102,9 +99,7 @@ def add_serve(sub: Any) -> None:
                    help="blind A/B comparison of two or more sessions (checkpoints): pairs from the same start, "
                         "names hidden until the vote (keys A, B, =); votes go to each session's votes.json "
                         "for inspector rank")
-    calibration_argument(p)
-    outcome_source_argument(p)
-    measure_arguments(p)
+    rollout_measure_arguments(p, limit_margin=False)
     p.set_defaults(func=_cmd_serve)
 
 
@@ -122,10 +117,7 @@ def add_export(sub: Any) -> None:
     jobs_argument(p, "worker processes writing several recordings")
     no_cache_argument(p)
     ray_argument(p, "write the recordings")
-    limit_margin_argument(p)
-    calibration_argument(p)
-    outcome_source_argument(p)
-    measure_arguments(p)
+    rollout_measure_arguments(p)
     p.set_defaults(func=_cmd_export)
 
 

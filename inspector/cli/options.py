@@ -180,6 +180,18 @@ def resolve(host: str, port: int) -> tuple[int, tuple] | OSError:
     return family, address
 
 
+def rollout_measure_arguments(p: argparse.ArgumentParser, limit_margin: bool = True, calibration: bool = True) -> None:
+    """What the commands that compute rollouts' rows take alike (report, compare, export, serve):
+    the joint-limit margin, a GR00T-Dreams dump's calibration, the outcome source and the sanity
+    measures' tolerances."""
+    if limit_margin:
+        limit_margin_argument(p)
+    if calibration:
+        calibration_argument(p)
+    outcome_source_argument(p)
+    measure_arguments(p)
+
+
 def outcome_source_argument(p: argparse.ArgumentParser) -> None:
     """``--outcome-source``: report, compare, serve and export read it the same way (the sources of
     :data:`inspector.outcomes.SOURCES`, spelled out: the parser imports nothing heavy)."""

@@ -9,17 +9,14 @@ from typing import Any
 from ..schema import json_text
 from . import flags as flag
 from .options import (
-    calibration_argument,
     dataset_argument,
     decision_arguments,
     emit,
     jobs_argument,
-    limit_margin_argument,
-    measure_arguments,
     measures,
     no_cache_argument,
-    outcome_source_argument,
     ray_argument,
+    rollout_measure_arguments,
 )
 
 
@@ -104,10 +101,7 @@ def add_report(sub: Any) -> None:
     p.add_argument("--sanity-config", metavar="FILE.json",
                    help="thresholds of the sanity tests over the defaults (implies --sanity; see docs/report.md)")
     ray_argument(p, "compute the rollouts")
-    limit_margin_argument(p)
-    calibration_argument(p)
-    outcome_source_argument(p)
-    measure_arguments(p)
+    rollout_measure_arguments(p)
     p.set_defaults(func=_cmd_report)
 
 
@@ -120,9 +114,7 @@ def add_compare(sub: Any) -> None:
     dataset_argument(p)
     jobs_argument(p, "worker processes (1 computes in this process)")
     no_cache_argument(p)
-    limit_margin_argument(p)
-    outcome_source_argument(p)
-    measure_arguments(p)
+    rollout_measure_arguments(p, calibration=False)
     p.set_defaults(func=_cmd_compare)
 
 

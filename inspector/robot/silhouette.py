@@ -140,7 +140,12 @@ def _coarse(path: str) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]:
     kept = src.with_name(f"{src.stem}-silhouette{SILHOUETTE_KEEP:g}-min{SILHOUETTE_MIN_FACES}.stl")
     in_cache = src.parent in {cache_dir(), _fallback_dir()}  # never beside the package's own meshes
     if in_cache and kept.is_file():
-        return _load(kept)
+        try:
+            v, f = _load(kept)
+            if len(f):
+                return v, f
+        except Exception:  # a damaged cache file (trimesh raises many types, or reads no faces): made again
+            pass
     v, f = _load(src)
     target = max(SILHOUETTE_MIN_FACES, int(len(f) * SILHOUETTE_KEEP))
     if target < len(f):

@@ -106,7 +106,8 @@ class RolloutRow(TypedDict):
     chunk_joints: ChunkJoints | None
     outcome: dict[str, Any] | None  # a simulated evaluation's verdict (lerobot-eval): success, rewards, task
     distribution: str | None  # "training" or "zero-shot" as the rollout states it (extra.distribution); null: not stated
-    # the sanity measures (analysis/sanity.py)
+    # the sanity measures (analysis/sanity.py's SanityMeasures; listed here, not inherited: the
+    # cache reads a row back in this class's key order, which is the order the row is written in)
     seams: SeamsJson | None
     completion: CompletionJson | None
     joint_coherence: CoherenceJson | None
